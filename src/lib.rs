@@ -1,0 +1,19 @@
+//! `sky`: a physically based spectral sky renderer and LUT baker, rebuilding
+//! the "skysim" pipeline of Polyphony Digital's GDC 2023 talk "Realistic
+//! Real-time Sky Dome Rendering in Gran Turismo 7".
+//!
+//! - [`atmosphere`]: the measured atmosphere model (`atmospheres/*.toml`) and
+//!   its optical properties;
+//! - [`mie`]: Mie theory (BHMIE), log-normal size distributions, phase tables;
+//! - [`spectrum`]: colour matching functions and the solar spectrum;
+//! - [`table`]: the tabulated data files of `atmospheres/data/`;
+//! - [`plot`]: PNG plots for people.
+
+pub mod atmosphere;
+pub mod mie;
+pub mod plot;
+pub mod spectrum;
+pub mod table;
+
+/// Version of this build, recorded in outputs.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
