@@ -13,6 +13,57 @@ pub struct Series {
     pub points: Vec<(f64, f64)>,
     /// Dashed curves are drawn thinner, for fits and approximations.
     pub dashed: bool,
+    /// Palette index; curves that belong together share one.
+    pub color: usize,
+}
+
+impl Series {
+    pub fn new(label: impl Into<String>, points: Vec<(f64, f64)>, color: usize) -> Series {
+        Series { label: label.into(), points, dashed: false, color }
+    }
+
+    pub fn dashed(mut self) -> Series {
+        self.dashed = true;
+        self
+    }
+}
+
+/// Splits a curve into runs of points that can be drawn on the axes (finite,
+/// and positive where an axis is logarithmic), so gaps are not bridged.
+fn drawable_runs(points: &[(f64, f64)], x: Scale, y: Scale) -> Vec<Vec<(f64, f64)>> {
+    let ok = |v: f64, s: Scale| v.is_finite() && (s == Scale::Linear || v > 0.0);
+    let mut runs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+    for &p in points {
+        if ok(p.0, x) && ok(p.1, y) {
+            runs.last_mut().unwrap().push(p);
+        } else if !runs.last().unwrap().is_empty() {
+            runs.push(Vec::new());
+        }
+    }
+    runs.retain(|r| r.len() > 1);
+    runs
+}
+
+fn tick_label(v: f64, s: Scale) -> String {
+    match s {
+        Scale::Log => {
+            let e = v.log10().round();
+            if (v.log10() - e).abs() < 1e-6 {
+                format!("1e{e}")
+            } else {
+                format!("{v:.1e}")
+            }
+        }
+        Scale::Linear => {
+            if v.abs() >= 1e4 || (v != 0.0 && v.abs() < 1e-2) {
+                format!("{v:.1e}")
+            } else if (v - v.round()).abs() < 1e-9 {
+                format!("{v:.0}")
+            } else {
+                format!("{v:.2}")
+            }
+        }
+    }
 }
 
 /// Axis scaling.
@@ -89,27 +140,28 @@ macro_rules! draw_chart {
         chart
             .configure_mesh()
             .x_desc($axes.x_label)
+            .x_label_formatter(&|v| tick_label(*v, $axes.x_scale))
+            .y_label_formatter(&|v| tick_label(*v, $axes.y_scale))
             .y_desc($axes.y_label)
             .label_style(("sans-serif", 16))
             .axis_desc_style(("sans-serif", 18))
             .draw()
             .map_err(|e| e.to_string())?;
-        for (i, s) in $series.iter().enumerate() {
-            let color = palette(i);
-            let style = if s.dashed { color.stroke_width(1) } else { color.stroke_width(2) };
-            let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
-            if s.dashed {
-                chart
-                    .draw_series(DashedLineSeries::new(pts, 8, 5, style))
-                    .map_err(|e| e.to_string())?
-                    .label(s.label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(1)));
-            } else {
-                chart
-                    .draw_series(LineSeries::new(pts, style))
-                    .map_err(|e| e.to_string())?
-                    .label(s.label.clone())
-                    .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        for s in $series.iter() {
+            let color = palette(s.color);
+            let width = if s.dashed { 1 } else { 2 };
+            let style = color.stroke_width(width);
+            for (j, pts) in drawable_runs(&s.points, $axes.x_scale, $axes.y_scale).into_iter().enumerate() {
+                let drawn = if s.dashed {
+                    chart.draw_series(DashedLineSeries::new(pts, 8, 5, style)).map_err(|e| e.to_string())?
+                } else {
+                    chart.draw_series(LineSeries::new(pts, style)).map_err(|e| e.to_string())?
+                };
+                if j == 0 {
+                    drawn
+                        .label(s.label.clone())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(width)));
+                }
             }
         }
         chart

@@ -85,6 +85,7 @@ struct RawAerosol {
     refractive_index: Option<S<toml::Value>>,
     size_distribution: Option<S<String>>,
     modes: Option<S<Vec<S<RawMode>>>>,
+    radius_range_um: Option<S<Vec<f64>>>,
     number_density_cm3: Option<S<f64>>,
     optical_depth: Option<S<f64>>,
     reference_wavelength_nm: Option<S<f64>>,
@@ -497,7 +498,7 @@ pub(super) fn parse(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
             ctx.err(&a.name, format!("{label} is defined twice"));
         }
         let prof = lookup(&mut ctx, &a.profile, &label);
-        let mie_keys = a.refractive_index.is_some() || a.modes.is_some() || a.size_distribution.is_some();
+        let mie_keys = a.refractive_index.is_some() || a.modes.is_some() || a.size_distribution.is_some() || a.radius_range_um.is_some();
         let analytic_keys = a.phase.is_some() || a.g.is_some() || a.single_scattering_albedo.is_some() || a.angstrom_exponent.is_some();
         let optics = if mie_keys && analytic_keys {
             ctx.err(rae, format!("{label}: give either Mie optics (refractive_index, modes) or analytic optics (phase, g, single_scattering_albedo, angstrom_exponent), not both"));
@@ -718,6 +719,16 @@ fn mie_optics(ctx: &mut Ctx, a: &RawAerosol, at: &S<RawAerosol>, label: &str) ->
         ctx.err(modes_s, format!("{label}: modes is empty"));
         return None;
     }
+    let (r_min, r_max) = match &a.radius_range_um {
+        None => (0.0, f64::INFINITY),
+        Some(rr) => match rr.get_ref().as_slice() {
+            [lo, hi] if lo.is_finite() && hi.is_finite() && *lo >= 0.0 && hi > lo => (*lo, *hi),
+            _ => {
+                ctx.err(rr, format!("{label}: radius_range_um must be [min, max] with 0 <= min < max"));
+                return None;
+            }
+        },
+    };
     let mut modes = Vec::new();
     for m in modes_s.get_ref() {
         let r = m.get_ref();
@@ -739,9 +750,9 @@ fn mie_optics(ctx: &mut Ctx, a: &RawAerosol, at: &S<RawAerosol>, label: &str) ->
         if volume {
             // Volume fraction → number fraction: N_i ∝ V_i / mean particle volume.
             let mode = LogNormal::from_volume_median(radius, sigma);
-            modes.push((weight / mode.mean_volume_um3(), mode));
+            modes.push((weight / mode.mean_volume_um3(), mode.truncated(r_min, r_max)));
         } else {
-            modes.push((weight, LogNormal { median_radius_um: radius, sigma }));
+            modes.push((weight, LogNormal::new(radius, sigma).truncated(r_min, r_max)));
         }
     }
     if modes.len() != modes_s.get_ref().len() {

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Bump when the integration or solver changes results.
-const ALGORITHM_VERSION: &str = "sky-mie-1";
+const ALGORITHM_VERSION: &str = "sky-mie-2";
 
 /// A cache directory (or none: always compute).
 #[derive(Debug, Default)]
@@ -43,7 +43,7 @@ impl MieCache {
     fn key(m: C64, mode: &LogNormal, wavelength_nm: f64, angles_deg: &[f64]) -> String {
         let mut h = blake3::Hasher::new();
         h.update(ALGORITHM_VERSION.as_bytes());
-        for v in [m.re, m.im.abs(), mode.median_radius_um, mode.sigma, wavelength_nm] {
+        for v in [m.re, m.im.abs(), mode.median_radius_um, mode.sigma, mode.min_radius_um, mode.max_radius_um, wavelength_nm] {
             h.update(&v.to_le_bytes());
         }
         h.update(&(angles_deg.len() as u64).to_le_bytes());
@@ -96,7 +96,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let cache = MieCache::new(Some(dir.path().to_path_buf()));
         let m = C64::new(1.5, 0.001);
-        let mode = LogNormal { median_radius_um: 0.2, sigma: 0.4 };
+        let mode = LogNormal::new(0.2, 0.4);
         let a = cache.bulk_optics(m, &mode, 500.0, &[0.0, 90.0]);
         let b = cache.bulk_optics(m, &mode, 500.0, &[0.0, 90.0]);
         assert_eq!(a, b);

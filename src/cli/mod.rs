@@ -1,0 +1,91 @@
+//! The `sky` command line: argument definitions and dispatch.
+
+mod atmosphere;
+mod bench;
+mod mie;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// Exit code for bad input (an invalid atmosphere file, a failed check).
+pub const EXIT_INVALID: u8 = 1;
+/// Exit code for usage errors and unimplemented commands (clap also uses 2).
+pub const EXIT_USAGE: u8 = 2;
+
+#[derive(Parser)]
+#[command(
+    name = "sky",
+    version,
+    about = "Physically based spectral skies and LUTs for real-time engines",
+    long_about = "sky renders full-spectrum, path-traced skies from measured atmosphere models \
+(U.S. Standard 1976 air, ozone, Mie aerosols, spectral ground albedo, the ASTM G173 sun) \
+and bakes them into look-up tables, after Polyphony Digital's GDC 2023 talk on Gran Turismo 7's skies.",
+    after_help = "Exit codes: 0 success, 1 invalid input or failed run, 2 usage error or not implemented yet."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Path-trace a sky to an XYZ OpenEXR (not implemented yet)
+    Render(NotYet),
+    /// Run a render-farm worker daemon (not implemented yet)
+    Worker(NotYet),
+    /// Bake the basis-sky, fog, transmittance and ambient LUTs (not implemented yet)
+    BakeLuts(NotYet),
+    /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
+    Preview(NotYet),
+    /// Validate and inspect atmosphere files
+    #[command(subcommand)]
+    Atmosphere(atmosphere::AtmosphereCommand),
+    /// Mie scattering by one sphere or a log-normal size distribution
+    Mie(mie::MieArgs),
+    /// Benchmarks (timings for the README)
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
+}
+
+/// Arguments of a command that is not built yet: accepted and ignored.
+#[derive(clap::Args)]
+struct NotYet {
+    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+    args: Vec<String>,
+}
+
+fn not_yet(name: &str, issue: Option<u32>) -> anyhow::Result<ExitCode> {
+    let tracked = issue.map(|i| format!(" (tracked in issue #{i})")).unwrap_or_default();
+    eprintln!("sky {name}: not implemented yet{tracked}; no output was written");
+    Ok(ExitCode::from(EXIT_USAGE))
+}
+
+/// Parses the command line and runs it.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(_) => not_yet("render", Some(3)),
+        Command::Worker(_) => not_yet("worker", Some(4)),
+        Command::BakeLuts(_) => not_yet("bake-luts", None),
+        Command::Preview(_) => not_yet("preview", None),
+        Command::Atmosphere(c) => atmosphere::run(c),
+        Command::Mie(a) => mie::run(a),
+        Command::Bench(b) => bench::run(b),
+    };
+    match result {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(EXIT_INVALID)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn clap_definition_is_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}
