@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 /// Bump when the integration or solver changes results.
-const ALGORITHM_VERSION: &str = "sky-mie-2";
+const ALGORITHM_VERSION: &str = "sky-mie-3";
 
 /// A cache directory (or none: always compute).
 #[derive(Debug, Default)]
