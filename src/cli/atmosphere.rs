@@ -26,7 +26,7 @@ pub enum AtmosphereCommand {
         /// Atmosphere TOML file
         file: PathBuf,
         /// Wavelengths in nm
-        #[arg(long, value_name = "W,...", value_delimiter = ',', default_value = "400,450,500,550,600,650,700")]
+        #[arg(long, value_name = "W,...", allow_hyphen_values = true, value_delimiter = ',', default_value = "400,450,500,550,600,650,700")]
         wavelengths: Vec<f64>,
         /// Machine-readable output
         #[arg(long)]
@@ -62,7 +62,7 @@ pub fn run(c: AtmosphereCommand) -> Result<ExitCode> {
 
 fn inspect(file: &Path, wavelengths: &[f64], as_json: bool, plot_dir: Option<&Path>) -> Result<ExitCode> {
     if let Some(w) = wavelengths.iter().find(|w| !(**w > 0.0)) {
-        anyhow::bail!("--wavelengths: {w} is not a positive wavelength");
+        return super::usage(format!("--wavelengths: {w} is not a positive wavelength"));
     }
     let atm = match Atmosphere::load(file) {
         Ok(a) => a,

@@ -32,7 +32,9 @@ pub enum BenchCommand {
 pub fn run(c: BenchCommand) -> Result<ExitCode> {
     match c {
         BenchCommand::Mie { water, threads, step_nm, json } => {
-            anyhow::ensure!(step_nm > 0.0 && step_nm.is_finite(), "--step-nm must be positive");
+            if !(step_nm > 0.0 && step_nm.is_finite()) {
+                return super::usage("--step-nm must be positive");
+            }
             let index = match Table::read(&water) {
                 Ok(t) => RefractiveIndex::Table { n: t.function("n")?, k: t.function("k")? },
                 Err(_) => RefractiveIndex::Constant(num_complex::Complex64::new(1.33, 1e-7)),

@@ -1,6 +1,7 @@
 //! `sky mie`: Mie scattering of one sphere or a log-normal distribution.
 
-use anyhow::{bail, Result};
+use super::usage;
+use anyhow::Result;
 use num_complex::Complex64 as C64;
 use serde_json::json;
 use sky::mie::{self, LogNormal};
@@ -21,7 +22,7 @@ pub struct MieArgs {
     #[arg(long = "m", value_name = "N-Ki", allow_hyphen_values = true, value_parser = parse_m)]
     m: C64,
     /// Size parameter x = 2 pi r / wavelength (one sphere)
-    #[arg(long, value_name = "X")]
+    #[arg(long, value_name = "X", allow_hyphen_values = true)]
     x: Option<f64>,
     /// Sphere radius in micrometres (needs --wavelength-nm)
     #[arg(long, value_name = "R", requires = "wavelength_nm")]
@@ -33,7 +34,7 @@ pub struct MieArgs {
     #[arg(long, value_name = "W")]
     wavelength_nm: Option<f64>,
     /// Scattering angles for S1, S2 and the phase function, degrees
-    #[arg(long, value_name = "A,B,...", value_delimiter = ',', default_value = "0,1,2,5,10,20,30,45,60,90,120,150,180")]
+    #[arg(long, value_name = "A,B,...", allow_hyphen_values = true, value_delimiter = ',', default_value = "0,1,2,5,10,20,30,45,60,90,120,150,180")]
     angles_deg: Vec<f64>,
     /// Machine-readable output
     #[arg(long)]
@@ -46,25 +47,25 @@ fn parse_m(s: &str) -> Result<C64, String> {
 
 fn check_positive(flag: &str, v: f64) -> Result<()> {
     if !(v.is_finite() && v > 0.0) {
-        bail!("{flag} must be a positive number, got {v}");
+        return usage(format!("{flag} must be a positive number, got {v}"));
     }
     Ok(())
 }
 
 pub fn run(a: MieArgs) -> Result<ExitCode> {
     if let Some(bad) = a.angles_deg.iter().find(|t| !(0.0..=180.0).contains(*t)) {
-        bail!("--angles-deg: {bad} is outside 0 to 180 degrees");
+        return usage(format!("--angles-deg: {bad} is outside 0 to 180 degrees"));
     }
     if let Some(w) = a.wavelength_nm {
         check_positive("--wavelength-nm", w)?;
     }
     let mus: Vec<f64> = a.angles_deg.iter().map(|t| t.to_radians().cos()).collect();
     if let Some(ln) = &a.lognormal {
-        let [r, sigma] = ln.as_slice() else { bail!("--lognormal takes R_UM,SIGMA, e.g. 4.0,0.55") };
+        let [r, sigma] = ln.as_slice() else { return usage("--lognormal takes R_UM,SIGMA, e.g. 4.0,0.55") };
         check_positive("--lognormal radius", *r)?;
         check_positive("--lognormal sigma", *sigma)?;
         if *sigma > 1.5 {
-            bail!("--lognormal sigma is ln(GSD) and must be at most 1.5, got {sigma}");
+            return usage(format!("--lognormal sigma is ln(GSD) and must be at most 1.5, got {sigma}"));
         }
         let w = a.wavelength_nm.unwrap();
         let mode = LogNormal::new(*r, *sigma);
@@ -100,7 +101,7 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
     };
     check_positive("--x", x)?;
     if x > 1e5 {
-        bail!("--x {x} is beyond the supported range (up to 1e5)");
+        return usage(format!("--x {x} is beyond the supported range (up to 1e5)"));
     }
     let r = mie::bhmie(a.m, x, &mus);
     let phase: Vec<f64> =

@@ -47,6 +47,17 @@ enum Command {
     Bench(bench::BenchCommand),
 }
 
+/// A bad flag value found after parsing: reported like clap's own errors
+/// and with the same exit code.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// Returns a [`UsageError`] naming the flag.
+pub fn usage<T>(msg: impl Into<String>) -> anyhow::Result<T> {
+    Err(UsageError(msg.into()).into())
+}
+
 /// Arguments of a command that is not built yet: accepted and ignored.
 #[derive(clap::Args)]
 struct NotYet {
@@ -74,6 +85,10 @@ pub fn main() -> ExitCode {
     };
     match result {
         Ok(code) => code,
+        Err(e) if e.downcast_ref::<UsageError>().is_some() => {
+            eprintln!("error: {e:#}\n\nFor more information, try '--help'.");
+            ExitCode::from(EXIT_USAGE)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::from(EXIT_INVALID)

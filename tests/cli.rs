@@ -1,0 +1,133 @@
+//! End-to-end tests of the `sky` binary: exit codes, JSON output, plots.
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn sky(args: &[&str], cache: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(root()).env("SKY_CACHE_DIR", cache).output().unwrap()
+}
+
+fn text(o: &Output) -> (String, String) {
+    (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned())
+}
+
+#[test]
+fn help_lists_every_command() {
+    let c = tempfile::tempdir().unwrap();
+    let o = sky(&["--help"], c.path());
+    assert!(o.status.success());
+    let (out, _) = text(&o);
+    for cmd in ["render", "worker", "bake-luts", "preview", "atmosphere", "mie"] {
+        assert!(out.contains(cmd), "--help lacks {cmd}:\n{out}");
+    }
+}
+
+#[test]
+fn unbuilt_commands_say_so_and_exit_2() {
+    let c = tempfile::tempdir().unwrap();
+    let out_file = c.path().join("sky.exr");
+    for cmd in ["render", "worker", "bake-luts", "preview"] {
+        let o = sky(&[cmd, "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
+        assert_eq!(o.status.code(), Some(2), "{cmd}");
+        assert!(text(&o).1.contains("not implemented yet"), "{cmd}: {}", text(&o).1);
+        assert!(!out_file.exists());
+    }
+}
+
+#[test]
+fn check_reports_good_and_bad_files() {
+    let c = tempfile::tempdir().unwrap();
+    let o = sky(&["atmosphere", "check", "atmospheres/clear.toml", "atmospheres/hazed.toml"], c.path());
+    assert_eq!(o.status.code(), Some(0), "{:?}", text(&o));
+    let o = sky(&["atmosphere", "check", "atmospheres/clear.toml", "tests/bad_atmospheres/negative_sigma.toml"], c.path());
+    assert_eq!(o.status.code(), Some(1));
+    let (_, err) = text(&o);
+    assert!(err.contains("tests/bad_atmospheres/negative_sigma.toml:"), "{err}");
+    assert!(err.contains("sigma is ln(GSD)"), "{err}");
+    let o = sky(&["atmosphere", "check", "no/such/file.toml"], c.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(text(&o).1.contains("no/such/file.toml"));
+}
+
+#[test]
+fn inspect_json_has_documented_keys() {
+    let c = tempfile::tempdir().unwrap();
+    let o = sky(&["atmosphere", "inspect", "atmospheres/clear.toml", "--wavelengths", "450,550", "--json"], c.path());
+    assert!(o.status.success(), "{:?}", text(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["content_hash"].as_str().unwrap().len(), 64);
+    let s = &v["spectral"][1];
+    assert_eq!(s["wavelength_nm"], 550.0);
+    let tau_r = s["rayleigh_optical_depth"].as_f64().unwrap();
+    assert!((tau_r - 0.0971).abs() < 0.001, "{tau_r}");
+    let aod = s["aerosol_optical_depth"].as_f64().unwrap();
+    assert!((aod - 0.05).abs() < 0.002, "clear.toml asks for AOD 0.05 at 550 nm: {aod}");
+    for c in s["components"].as_array().unwrap().iter().chain([&s["total"]]) {
+        for k in ["name", "kind", "optical_depth", "scattering_optical_depth", "absorption_optical_depth", "single_scattering_albedo", "asymmetry", "extinction_ground_per_km"] {
+            assert!(!c[k].is_null(), "missing {k} in {c}");
+        }
+    }
+    let xy = v["sun"]["chromaticity_xy"].as_array().unwrap();
+    assert!((xy[0].as_f64().unwrap() - 0.3224).abs() < 0.005);
+    // Bad flags name the flag and exit 2.
+    let o = sky(&["atmosphere", "inspect", "atmospheres/clear.toml", "--wavelengths", "-5"], c.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("--wavelengths"));
+}
+
+#[test]
+fn inspect_writes_plots() {
+    let c = tempfile::tempdir().unwrap();
+    let dir = c.path().join("plots");
+    let o = sky(&["atmosphere", "inspect", "atmospheres/analytic-hg.toml", "--wavelengths", "550", "--plot", dir.to_str().unwrap()], c.path());
+    assert!(o.status.success(), "{:?}", text(&o));
+    for f in ["profiles.png", "extinction_550nm.png", "optical_depth.png", "phase_hg-haze.png"] {
+        let bytes = std::fs::read(dir.join(f)).unwrap_or_else(|_| panic!("{f} not written"));
+        assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n") && bytes.len() > 10_000, "{f}");
+    }
+    // No temporary files left behind.
+    assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 4);
+}
+
+#[test]
+fn mie_json_and_sign_convention() {
+    let c = tempfile::tempdir().unwrap();
+    let a = sky(&["mie", "--m", "1.33-1e-7i", "--x", "10", "--json"], c.path());
+    let b = sky(&["mie", "--m", "1.33+1e-7i", "--x", "10", "--json"], c.path());
+    assert!(a.status.success(), "{:?}", text(&a));
+    assert_eq!(a.stdout, b.stdout, "both signs mean the same absorbing sphere");
+    let v: Value = serde_json::from_slice(&a.stdout).unwrap();
+    assert!((v["q_ext"].as_f64().unwrap() - 2.2065).abs() < 1e-3);
+    for k in ["q_sca", "q_abs", "q_back", "g", "angles_deg", "s1_re", "s1_im", "s2_re", "s2_im", "phase_sr_inv"] {
+        assert!(!v[k].is_null(), "missing {k}");
+    }
+    let o = sky(&["mie", "--m", "1.33-1e-7i", "--lognormal", "4.0,0.55", "--wavelength-nm", "650", "--angles-deg", "0,90", "--json"], c.path());
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!(v["c_ext_um2"].as_f64().unwrap() > 100.0);
+    assert_eq!(v["phase_sr_inv"].as_array().unwrap().len(), 2);
+    let o = sky(&["mie", "--m", "1.5", "--radius-um", "0.2", "--wavelength-nm", "500", "--json"], c.path());
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!((v["x"].as_f64().unwrap() - 2.0 * std::f64::consts::PI * 0.2 / 0.5).abs() < 1e-12);
+}
+
+#[test]
+fn mie_bad_flags_exit_2_naming_the_flag() {
+    let c = tempfile::tempdir().unwrap();
+    for (args, flag) in [
+        (vec!["mie", "--m", "abc", "--x", "1"], "--m"),
+        (vec!["mie", "--m", "1.33", "--x", "-1"], "--x"),
+        (vec!["mie", "--m", "1.33", "--radius-um", "1"], "--wavelength-nm"),
+        (vec!["mie", "--m", "1.33", "--lognormal", "1", "--wavelength-nm", "500"], "--lognormal"),
+        (vec!["mie", "--m", "1.33", "--x", "1", "--angles-deg", "200"], "--angles-deg"),
+        (vec!["mie", "--m", "1.33"], "--x"),
+    ] {
+        let o = sky(&args, c.path());
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {:?}", text(&o));
+        assert!(text(&o).1.contains(flag), "{args:?}: {}", text(&o).1);
+    }
+}
