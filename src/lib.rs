@@ -12,6 +12,7 @@
 pub mod atmosphere;
 pub mod mie;
 pub mod plot;
+pub mod render;
 pub mod spectrum;
 pub mod table;
 

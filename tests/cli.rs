@@ -31,7 +31,7 @@ fn help_lists_every_command() {
 fn unbuilt_commands_say_so_and_exit_2() {
     let c = tempfile::tempdir().unwrap();
     let out_file = c.path().join("sky.exr");
-    for cmd in ["render", "worker", "bake-luts", "preview"] {
+    for cmd in ["worker", "bake-luts", "preview"] {
         let o = sky(&[cmd, "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
         assert_eq!(o.status.code(), Some(2), "{cmd}");
         assert!(text(&o).1.contains("not implemented yet"), "{cmd}: {}", text(&o).1);
@@ -130,4 +130,64 @@ fn mie_bad_flags_exit_2_naming_the_flag() {
         assert_eq!(o.status.code(), Some(2), "{args:?}: {:?}", text(&o));
         assert!(text(&o).1.contains(flag), "{args:?}: {}", text(&o).1);
     }
+}
+
+#[test]
+fn render_writes_exr_png_and_json() {
+    let c = tempfile::tempdir().unwrap();
+    let exr_path = c.path().join("sky.exr");
+    let png_path = c.path().join("sky.png");
+    let args = [
+        "render", "atmospheres/analytic-hg.toml", "--camera", "fisheye", "--size", "12x10", "--sun-zenith-deg", "70",
+        "--spp", "4", "--band-nm", "47", "--spectral-nm", "550", "--out", exr_path.to_str().unwrap(),
+        "--png", png_path.to_str().unwrap(), "--json",
+    ];
+    let o = sky(&args, c.path());
+    assert!(o.status.success(), "{:?}", text(&o));
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["width"], 12);
+    assert!(std::fs::read(&png_path).unwrap().starts_with(b"\x89PNG"));
+    use exr::prelude::*;
+    let img = read_all_flat_layers_from_file(&exr_path).unwrap();
+    let layer = &img.layer_data[0];
+    assert_eq!(layer.size, Vec2(12, 10));
+    let names: Vec<String> = layer.channel_data.list.iter().map(|c| c.name.to_string()).collect();
+    for n in ["X", "Y", "Z", "stderr.Y", "spectral.550nm", "stderr.spectral.550nm"] {
+        assert!(names.iter().any(|x| x == n), "missing channel {n}: {names:?}");
+    }
+    let meta = match layer.attributes.other.get(&Text::from("sky.metadata")) {
+        Some(AttributeValue::Text(t)) => t.to_string(),
+        other => panic!("no sky.metadata attribute: {other:?}"),
+    };
+    let meta: Value = serde_json::from_str(&meta).unwrap();
+    for k in ["atmosphere_hash", "sun_zenith_deg", "spp", "seed", "version"] {
+        assert!(!meta[k].is_null(), "missing metadata {k}: {meta}");
+    }
+    // The same seed gives the same file, byte for byte.
+    let again = c.path().join("again.exr");
+    let mut args2 = args.to_vec();
+    let pos = args2.iter().position(|a| *a == exr_path.to_str().unwrap()).unwrap();
+    args2[pos] = again.to_str().unwrap();
+    let o = sky(&args2, c.path());
+    assert!(o.status.success());
+    assert!(std::fs::read(&exr_path).unwrap() == std::fs::read(&again).unwrap(), "two renders with one seed differ");
+}
+
+#[test]
+fn render_bad_flags_exit_2() {
+    let c = tempfile::tempdir().unwrap();
+    for (args, flag) in [
+        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "130", "--out", "x.exr"], "--sun-zenith-deg"),
+        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--out", "x.png"], "--out"),
+        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--size", "0x5", "--out", "x.exr"], "--size"),
+        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--camera", "directions", "--out", "x.exr"], "--directions"),
+        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--spp", "0", "--out", "x.exr"], "--spp"),
+    ] {
+        let o = sky(&args, c.path());
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {:?}", text(&o));
+        assert!(text(&o).1.contains(flag), "{args:?}: {}", text(&o).1);
+    }
+    let o = sky(&["render", "tests/bad_atmospheres/negative_sigma.toml", "--sun-zenith-deg", "30", "--out", "x.exr"], c.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(!root().join("x.exr").exists());
 }

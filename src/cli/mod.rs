@@ -3,6 +3,7 @@
 mod atmosphere;
 mod bench;
 mod mie;
+mod render;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -29,8 +30,8 @@ pub struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Path-trace a sky to an XYZ OpenEXR (not implemented yet)
-    Render(NotYet),
+    /// Path-trace a full-spectrum sky to an XYZ OpenEXR
+    Render(render::RenderArgs),
     /// Run a render-farm worker daemon (not implemented yet)
     Worker(NotYet),
     /// Bake the basis-sky, fog, transmittance and ambient LUTs (not implemented yet)
@@ -75,7 +76,7 @@ fn not_yet(name: &str, issue: Option<u32>) -> anyhow::Result<ExitCode> {
 pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(_) => not_yet("render", Some(3)),
+        Command::Render(a) => render::run(a),
         Command::Worker(_) => not_yet("worker", Some(4)),
         Command::BakeLuts(_) => not_yet("bake-luts", None),
         Command::Preview(_) => not_yet("preview", None),

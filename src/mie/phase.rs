@@ -24,70 +24,98 @@ pub fn phase_grid_deg() -> Vec<f64> {
     a
 }
 
-/// A phase function tabulated on increasing angles, with the cumulative
-/// distribution over the sphere for sampling.
+/// A phase function tabulated on scattering angles, used by the renderer
+/// both to evaluate and to sample: between table angles it is linear in
+/// μ = cos θ, so its integral over each interval is exact, sampling inverts a
+/// quadratic, and the sampling density equals the evaluated function (the
+/// path weight after sampling is exactly 1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct PhaseTable {
-    pub angles_rad: Vec<f64>,
-    /// p(θ), sr⁻¹.
+    /// Cosines of the table angles, increasing (θ from 180° down to 0°).
+    pub mu: Vec<f64>,
+    /// p at those cosines divided by `integral`, sr⁻¹ (normalised to 1).
     pub p_sr_inv: Vec<f64>,
-    /// CDF at each angle: ∫₀^θ p 2π sin θ' dθ' (trapezoid), scaled to end at 1.
+    /// Cumulative probability at each `mu` (0 at μ = −1, 1 at μ = 1).
     pub cdf: Vec<f64>,
-    /// The unscaled end value of the CDF (1 up to discretisation error).
+    /// The integral over the sphere of the input table (1 up to the
+    /// discretisation of the input).
     pub integral: f64,
 }
 
 impl PhaseTable {
+    /// From p(θ) at increasing angles in degrees (must span 0 to 180).
     pub fn new(angles_deg: &[f64], p_sr_inv: &[f64]) -> PhaseTable {
         assert_eq!(angles_deg.len(), p_sr_inv.len());
-        let angles_rad: Vec<f64> = angles_deg.iter().map(|a| a.to_radians()).collect();
-        let mut cdf = vec![0.0; angles_rad.len()];
-        for i in 1..angles_rad.len() {
-            let (t0, t1) = (angles_rad[i - 1], angles_rad[i]);
-            let f0 = p_sr_inv[i - 1] * t0.sin();
-            let f1 = p_sr_inv[i] * t1.sin();
-            cdf[i] = cdf[i - 1] + 2.0 * PI * 0.5 * (f0 + f1) * (t1 - t0);
+        assert!(angles_deg.len() >= 2 && angles_deg[0] == 0.0 && *angles_deg.last().unwrap() == 180.0);
+        let mut mu: Vec<f64> = angles_deg.iter().rev().map(|a| a.to_radians().cos()).collect();
+        mu[0] = -1.0;
+        *mu.last_mut().unwrap() = 1.0;
+        let p: Vec<f64> = p_sr_inv.iter().rev().map(|v| v.max(0.0)).collect();
+        let mut cdf = vec![0.0; mu.len()];
+        for i in 1..mu.len() {
+            cdf[i] = cdf[i - 1] + 2.0 * PI * 0.5 * (p[i - 1] + p[i]) * (mu[i] - mu[i - 1]);
         }
         let integral = *cdf.last().unwrap();
+        let p_sr_inv = p.iter().map(|v| v / integral).collect();
         for c in &mut cdf {
             *c /= integral;
         }
-        PhaseTable { angles_rad, p_sr_inv: p_sr_inv.to_vec(), cdf, integral }
+        PhaseTable { mu, p_sr_inv, cdf, integral }
     }
 
-    /// p(θ), linear between table angles.
+    /// p(μ), sr⁻¹, normalised.
+    pub fn eval_mu(&self, mu: f64) -> f64 {
+        crate::table::interp_linear(&self.mu, &self.p_sr_inv, mu)
+    }
+
+    /// p(θ), sr⁻¹, normalised.
     pub fn eval(&self, theta_rad: f64) -> f64 {
-        crate::table::interp_linear(&self.angles_rad, &self.p_sr_inv, theta_rad)
+        self.eval_mu(theta_rad.cos())
     }
 
-    /// Samples a scattering angle (radians) from u ∈ [0, 1) by inverting the
-    /// tabulated CDF; within a table interval θ is linear in the CDF.
-    pub fn sample_theta(&self, u: f64) -> f64 {
-        let i = self.cdf.partition_point(|&c| c <= u).clamp(1, self.cdf.len() - 1);
+    /// Samples μ = cos θ from u ∈ [0, 1) with density exactly
+    /// 2π [`eval_mu`](Self::eval_mu)(μ).
+    pub fn sample_mu(&self, u: f64) -> f64 {
+        let n = self.cdf.len();
+        let i = self.cdf.partition_point(|&c| c <= u).clamp(1, n - 1);
         let (c0, c1) = (self.cdf[i - 1], self.cdf[i]);
-        let t = if c1 > c0 { (u - c0) / (c1 - c0) } else { 0.5 };
-        self.angles_rad[i - 1] + t * (self.angles_rad[i] - self.angles_rad[i - 1])
+        let (m0, m1) = (self.mu[i - 1], self.mu[i]);
+        let (p0, p1) = (self.p_sr_inv[i - 1], self.p_sr_inv[i]);
+        if c1 <= c0 {
+            return m0;
+        }
+        // Within the interval the density is linear in t = (μ − m0)/(m1 − m0):
+        // F(t) = (p0 t + (p1 − p0) t²/2) / ((p0 + p1)/2); solve F(t) = r.
+        let r = ((u - c0) / (c1 - c0)).clamp(0.0, 1.0);
+        let a = 0.5 * (p1 - p0);
+        let b = p0;
+        let c = -r * 0.5 * (p0 + p1);
+        let t = if a.abs() < 1e-12 * (p0 + p1) {
+            r
+        } else {
+            // Stable root of a t² + b t + c = 0 in [0, 1].
+            let disc = (b * b - 4.0 * a * c).max(0.0).sqrt();
+            (2.0 * -c / (b + disc)).clamp(0.0, 1.0)
+        };
+        m0 + t * (m1 - m0)
     }
 
-    /// The density (per steradian) with which [`sample_theta`] picks θ.
-    pub fn sample_pdf_sr_inv(&self, theta_rad: f64) -> f64 {
-        let i = self.angles_rad.partition_point(|&a| a <= theta_rad).clamp(1, self.angles_rad.len() - 1);
-        let dt = self.angles_rad[i] - self.angles_rad[i - 1];
-        let dc = self.cdf[i] - self.cdf[i - 1];
-        let s = theta_rad.sin().max(1e-12);
-        dc / dt / (2.0 * PI * s)
+    /// Samples a scattering angle in radians.
+    pub fn sample_theta(&self, u: f64) -> f64 {
+        self.sample_mu(u).clamp(-1.0, 1.0).acos()
     }
 
-    /// Asymmetry parameter ⟨cos θ⟩ of the tabulated function.
+    /// Asymmetry parameter ⟨cos θ⟩ (exact for the piecewise-linear function).
     pub fn mean_cosine(&self) -> f64 {
         let mut s = 0.0;
-        for i in 1..self.angles_rad.len() {
-            let (t0, t1) = (self.angles_rad[i - 1], self.angles_rad[i]);
-            let f0 = self.p_sr_inv[i - 1] * t0.sin() * t0.cos();
-            let f1 = self.p_sr_inv[i] * t1.sin() * t1.cos();
-            s += 2.0 * PI * 0.5 * (f0 + f1) * (t1 - t0);
+        for i in 1..self.mu.len() {
+            let (m0, m1) = (self.mu[i - 1], self.mu[i]);
+            let (p0, p1) = (self.p_sr_inv[i - 1], self.p_sr_inv[i]);
+            // ∫ μ (p0 + (p1 − p0) t) dμ over the interval, exactly.
+            let h = m1 - m0;
+            s += 2.0 * PI * h * (p0 * (2.0 * m0 + m1) + p1 * (m0 + 2.0 * m1)) / 6.0;
         }
-        s / self.integral
+        s
     }
 }
 
@@ -160,13 +188,19 @@ mod tests {
         let t = PhaseTable::new(&grid, &p);
         assert!((t.integral - 1.0).abs() < 1e-3, "{}", t.integral);
         assert!((t.mean_cosine() - 0.7).abs() < 2e-3, "{}", t.mean_cosine());
+        // Evaluation and the sampling density agree: a histogram in μ of
+        // samples matches ∫ 2π p dμ of the table over each bin.
+        for theta in [0.0f64, 0.3, 1.0, 2.0, 3.0] {
+            let e = henyey_greenstein(theta.cos(), 0.7);
+            assert!((t.eval(theta) / e - 1.0).abs() < 2e-3, "{theta}: {} vs {e}", t.eval(theta));
+        }
         // Histogram of samples in cos θ against the exact HG probabilities.
         let bins = 20;
         let mut h = vec![0usize; bins];
         let n = 200_000;
         for i in 0..n {
             let u = (i as f64 + 0.5) / n as f64;
-            let mu = t.sample_theta(u).cos();
+            let mu = t.sample_mu(u);
             h[(((mu + 1.0) / 2.0 * bins as f64) as usize).min(bins - 1)] += 1;
         }
         // Exact HG CDF in μ: P(μ) = (1 − g²)/(2g) [1/√(1+g²−2gμ) − 1/(1+g)].

@@ -1,0 +1,290 @@
+//! `sky render`: the path tracer on the local cores.
+
+use super::{usage, EXIT_INVALID};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+use sky::atmosphere::Atmosphere;
+use sky::mie::MieCache;
+use sky::render::camera::Camera;
+use sky::render::tracer::Estimator;
+use sky::render::{self, output, Scene, Settings, WavelengthSampling};
+use sky::table::Table;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum CameraKind {
+    /// Full sphere, azimuth across, zenith angle down
+    Equirect,
+    /// Upper hemisphere, equidistant, zenith at the centre
+    Fisheye,
+    /// Perspective view (--look-azimuth-deg, --look-elevation-deg, --fov-deg)
+    Pinhole,
+    /// The LUT's adaptive (u, v) mapping (not implemented yet)
+    Lut,
+    /// A CSV of zenith_deg,azimuth_deg rows (--directions FILE)
+    Directions,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Sampling {
+    Luminance,
+    Tristimulus,
+}
+
+#[derive(clap::Args)]
+#[command(after_help = "Units: X, Y, Z are CIE 1931 tristimulus values of the sky radiance times 683 lm/W \
+(Y is luminance in cd/m^2); spectral channels are radiance in W m^-2 sr^-1 nm^-1; stderr.* channels are \
+the per-pixel standard errors of the mean.\n\nExamples:\n  sky render atmospheres/clear.toml --camera fisheye --size 256x256 \
+--sun-zenith-deg 80 --spp 64 --out sky.exr --png sky.png\n  sky render atmospheres/hazed.toml --camera directions --directions dirs.csv \
+--sun-zenith-deg 60 --spectral-nm 450,550,650 --spp 1000 --json")]
+pub struct RenderArgs {
+    /// Atmosphere TOML file
+    atmosphere: PathBuf,
+    /// Camera model
+    #[arg(long, value_enum, default_value = "fisheye")]
+    camera: CameraKind,
+    /// Image size WIDTHxHEIGHT
+    #[arg(long, default_value = "128x128", value_parser = parse_size)]
+    size: (usize, usize),
+    /// Sun zenith angle in degrees (90 is the horizon; up to 120)
+    #[arg(long, allow_hyphen_values = true)]
+    sun_zenith_deg: f64,
+    /// Sun azimuth in degrees (0 = +x, 90 = +y)
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    sun_azimuth_deg: f64,
+    /// Observer altitude above the ground in metres
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    altitude_m: f64,
+    /// Samples per pixel
+    #[arg(long, default_value_t = 64, conflicts_with = "max_rel_error")]
+    spp: u32,
+    /// Adaptive sampling to a relative standard error (not implemented yet)
+    #[arg(long)]
+    max_rel_error: Option<f64>,
+    /// Random seed; a pixel's samples depend only on (seed, pixel, sample)
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output OpenEXR file
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Also write spectral radiance channels at these wavelengths (nm)
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    spectral_nm: Vec<f64>,
+    /// Also write a tonemapped PNG
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Exposure adjustment of the PNG in stops
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    exposure_ev: f64,
+    /// Machine-readable summary (with --camera directions: per-direction radiances)
+    #[arg(long)]
+    json: bool,
+    /// Directions CSV for --camera directions (columns zenith_deg,azimuth_deg)
+    #[arg(long)]
+    directions: Option<PathBuf>,
+    /// Pinhole: view azimuth, degrees
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    look_azimuth_deg: f64,
+    /// Pinhole: view elevation above the horizon, degrees
+    #[arg(long, default_value_t = 10.0, allow_hyphen_values = true)]
+    look_elevation_deg: f64,
+    /// Pinhole: horizontal field of view, degrees
+    #[arg(long, default_value_t = 60.0)]
+    fov_deg: f64,
+    /// Width of the spectral bands in nm
+    #[arg(long, default_value_t = 5.0)]
+    band_nm: f64,
+    /// How samples pick their wavelength band
+    #[arg(long, value_enum, default_value = "luminance")]
+    wavelength_sampling: Sampling,
+    /// Worker threads (default: all cores)
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Hide the sun's disk from camera rays (diffuse sky only)
+    #[arg(long)]
+    hide_sun_disk: bool,
+    /// The naive estimator (analog tracking, no next-event estimation), for comparisons
+    #[arg(long, hide = true)]
+    naive: bool,
+}
+
+fn parse_size(s: &str) -> Result<(usize, usize), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 256x128"))?;
+    let w: usize = w.trim().parse().map_err(|_| format!("`{s}`: bad width"))?;
+    let h: usize = h.trim().parse().map_err(|_| format!("`{s}`: bad height"))?;
+    if w == 0 || h == 0 || w * h > 1 << 26 {
+        return Err(format!("`{s}`: width and height must be positive and the image at most 64 Mpixel"));
+    }
+    Ok((w, h))
+}
+
+fn read_directions(path: &PathBuf) -> Result<Vec<(f64, f64)>> {
+    let t = Table::read(path).map_err(anyhow::Error::new)?;
+    let z = t.column("zenith_deg").map_err(anyhow::Error::new)?;
+    let a = t.column("azimuth_deg").map_err(anyhow::Error::new)?;
+    Ok(z.iter().copied().zip(a.iter().copied()).collect())
+}
+
+pub fn run(a: RenderArgs) -> Result<ExitCode> {
+    if a.max_rel_error.is_some() {
+        eprintln!("sky render: --max-rel-error (adaptive sampling) is not implemented yet; use --spp");
+        return Ok(ExitCode::from(super::EXIT_USAGE));
+    }
+    if !(0.0..=120.0).contains(&a.sun_zenith_deg) {
+        return usage(format!("--sun-zenith-deg must be between 0 and 120, got {}", a.sun_zenith_deg));
+    }
+    if !(a.altitude_m >= 0.0 && a.altitude_m.is_finite()) {
+        return usage(format!("--altitude-m must be at least 0, got {}", a.altitude_m));
+    }
+    if a.spp == 0 {
+        return usage("--spp must be at least 1");
+    }
+    if !(a.band_nm >= 1.0 && a.band_nm <= 470.0) {
+        return usage(format!("--band-nm must be between 1 and 470, got {}", a.band_nm));
+    }
+    if let Some(l) = a.spectral_nm.iter().find(|l| !(360.0..=830.0).contains(*l)) {
+        return usage(format!("--spectral-nm: {l} is outside 360 to 830 nm"));
+    }
+    if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {
+        return usage(format!("--fov-deg must be between 0 and 179, got {}", a.fov_deg));
+    }
+    if a.out.is_none() && !a.json {
+        return usage("give --out FILE.exr (or --json)");
+    }
+    if let Some(o) = &a.out {
+        if o.extension().is_none_or(|e| e != "exr") {
+            return usage(format!("--out {}: the output is OpenEXR and must end in .exr", o.display()));
+        }
+    }
+    let (camera, (width, height)) = match a.camera {
+        CameraKind::Equirect => (Camera::Equirect, a.size),
+        CameraKind::Fisheye => (Camera::Fisheye, a.size),
+        CameraKind::Pinhole => (Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg }, a.size),
+        CameraKind::Lut => {
+            eprintln!("sky render: --camera lut needs the LUT mappings of the bake, which are not implemented yet");
+            return Ok(ExitCode::from(super::EXIT_USAGE));
+        }
+        CameraKind::Directions => {
+            let Some(f) = &a.directions else { return usage("--camera directions needs --directions FILE.csv") };
+            let list = read_directions(f).with_context(|| format!("--directions {}", f.display()))?;
+            let n = list.len();
+            (Camera::Directions(list), (n, 1))
+        }
+    };
+    let atm = match Atmosphere::load(&a.atmosphere) {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("{e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let settings = Settings {
+        camera,
+        width,
+        height,
+        sun_zenith_deg: a.sun_zenith_deg,
+        sun_azimuth_deg: a.sun_azimuth_deg,
+        altitude_m: a.altitude_m,
+        spp: a.spp,
+        seed: a.seed,
+        spectral_nm: a.spectral_nm.clone(),
+        xyz: true,
+        band_nm: a.band_nm,
+        wavelength_sampling: match a.wavelength_sampling {
+            Sampling::Luminance => WavelengthSampling::Luminance,
+            Sampling::Tristimulus => WavelengthSampling::Tristimulus,
+        },
+        estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
+        sun_disk: !a.hide_sun_disk,
+    };
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let c = cancel.clone();
+        let _ = ctrlc::set_handler(move || c.store(true, Ordering::SeqCst));
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build()?;
+    let cache = MieCache::from_env();
+    let start = Instant::now();
+    let steps = Scene::steps(&atm, &settings);
+    let prep = ProgressBar::new(steps as u64);
+    prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
+    let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
+    prep.finish_and_clear();
+    let prep_s = start.elapsed().as_secs_f64();
+    let n = width * height;
+    let bar = ProgressBar::new(n as u64);
+    bar.set_style(
+        ProgressStyle::with_template("render [{bar:30}] {pos}/{len} px  {per_sec}  eta {eta}  {msg}").unwrap().progress_chars("=> "),
+    );
+    bar.set_message(format!("{} spp", a.spp));
+    let t0 = Instant::now();
+    let result = pool.install(|| render::render(&scene, &settings, &cancel, &|| bar.inc(1)));
+    bar.finish_and_clear();
+    let image = match result {
+        Ok(i) => i,
+        Err(render::RenderError::Cancelled) => {
+            eprintln!("sky render: cancelled; nothing was written");
+            return Ok(ExitCode::from(130));
+        }
+    };
+    let render_s = t0.elapsed().as_secs_f64();
+    let samples = n as f64 * a.spp as f64 * (1 + settings.spectral_nm.len()) as f64;
+    let metadata = vec![
+        ("version".to_string(), sky::VERSION.to_string()),
+        ("atmosphere".to_string(), atm.path.display().to_string()),
+        ("atmosphere_hash".to_string(), atm.content_hash.clone()),
+        ("sun_zenith_deg".to_string(), a.sun_zenith_deg.to_string()),
+        ("sun_azimuth_deg".to_string(), a.sun_azimuth_deg.to_string()),
+        ("altitude_m".to_string(), a.altitude_m.to_string()),
+        ("spp".to_string(), a.spp.to_string()),
+        ("seed".to_string(), a.seed.to_string()),
+        ("band_nm".to_string(), a.band_nm.to_string()),
+        ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2); spectral: W m^-2 sr^-1 nm^-1".to_string()),
+    ];
+    if let Some(o) = &a.out {
+        output::write_exr(o, &image, &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
+    }
+    if let Some(p) = &a.png {
+        let sun_xyz = sky::spectrum::spectrum_to_xyz(&atm.sun.irradiance_w_m2_nm);
+        output::write_png(p, &image, a.exposure_ev, Some(sun_xyz)).with_context(|| format!("writing {}", p.display()))?;
+    }
+    if a.json {
+        let mut v = json!({
+            "atmosphere": atm.path.display().to_string(),
+            "atmosphere_hash": atm.content_hash,
+            "width": width, "height": height, "spp": a.spp, "seed": a.seed,
+            "sun_zenith_deg": a.sun_zenith_deg, "sun_azimuth_deg": a.sun_azimuth_deg,
+            "prepare_seconds": prep_s, "render_seconds": render_s,
+            "paths_per_second": samples / render_s.max(1e-9),
+            "spectral_nm": settings.spectral_nm,
+        });
+        if let Camera::Directions(list) = &settings.camera {
+            v["directions"] = json!(list
+                .iter()
+                .zip(&image.pixels)
+                .map(|((z, az), p)| json!({
+                    "zenith_deg": z, "azimuth_deg": az,
+                    "xyz": p.xyz, "xyz_stderr": p.xyz_stderr,
+                    "radiance_w_m2_sr_nm": p.spectral, "radiance_stderr_w_m2_sr_nm": p.spectral_stderr,
+                }))
+                .collect::<Vec<_>>());
+        }
+        println!("{}", serde_json::to_string_pretty(&v)?);
+    } else {
+        eprintln!(
+            "rendered {}x{} at {} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
+            width,
+            height,
+            a.spp,
+            render_s,
+            samples / render_s.max(1e-9),
+            prep_s
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}

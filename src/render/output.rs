@@ -1,0 +1,91 @@
+//! Writing renders: OpenEXR (X, Y, Z, their standard errors, spectral
+//! channels, metadata) and a tonemapped PNG for people. Files are written
+//! to a temporary file in the target directory and renamed into place.
+
+use super::Image;
+use exr::prelude::*;
+use std::path::Path;
+
+/// Metadata stored as text attributes in the EXR header.
+pub type Metadata = Vec<(String, String)>;
+
+/// Writes the image as a single-layer OpenEXR with f32 channels.
+pub fn write_exr(path: &Path, img: &Image, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
+    let (w, h) = (img.width, img.height);
+    let chan = |name: String, f: &dyn Fn(&super::PixelResult) -> f64| AnyChannel::new(name.as_str(), FlatSamples::F32(img.pixels.iter().map(|p| f(p) as f32).collect()));
+    let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
+    for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
+        list.push(chan(name.to_string(), &move |p| p.xyz[c]));
+        list.push(chan(format!("stderr.{name}"), &move |p| p.xyz_stderr[c]));
+    }
+    for (j, l) in spectral_nm.iter().enumerate() {
+        list.push(chan(format!("spectral.{l}nm"), &move |p| p.spectral[j]));
+        list.push(chan(format!("stderr.spectral.{l}nm"), &move |p| p.spectral_stderr[j]));
+    }
+    // One text attribute holding the metadata as JSON with sorted keys: the
+    // header's other attributes live in a hash map whose order varies from
+    // run to run, and renders must be byte-identical.
+    let mut attrs = LayerAttributes::named("sky");
+    let sorted: std::collections::BTreeMap<&str, &str> = metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let json = serde_json::to_string(&sorted).expect("serialisable");
+    attrs.other.insert(Text::from("sky.metadata"), AttributeValue::Text(Text::from(json.as_str())));
+    let layer = Layer::new((w, h), attrs, Encoding::FAST_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(list)));
+    let image = exr::image::Image::from_layer(layer);
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let tmp = tempfile::NamedTempFile::new_in(dir)?;
+    image.write().to_file(tmp.path()).map_err(|e| std::io::Error::other(e.to_string()))?;
+    tmp.as_file().sync_all()?;
+    tmp.persist(path).map_err(|e| e.error)?;
+    Ok(())
+}
+
+/// XYZ → linear sRGB (IEC 61966-2-1, D65; the matrix colour-science uses).
+pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
+    let [x, y, z] = xyz;
+    [
+        3.2404542 * x - 1.5371385 * y - 0.4985314 * z,
+        -0.9692660 * x + 1.8760108 * y + 0.0415560 * z,
+        0.0556434 * x - 0.2040259 * y + 1.0572252 * z,
+    ]
+}
+
+fn srgb_oetf(v: f64) -> f64 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.0031308 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// Writes a tonemapped PNG: exposure set so the median luminance of the
+/// pixels in view maps to 0.25 (times 2^exposure_ev), then a Reinhard
+/// curve per channel and the sRGB transfer function. The image is
+/// white-balanced by dividing by the sun's own XYZ chromaticity when given,
+/// so sunlight looks white.
+pub fn write_png(path: &Path, img: &Image, exposure_ev: f64, white_xyz: Option<[f64; 3]>) -> std::io::Result<()> {
+    let mut lum: Vec<f64> = img.pixels.iter().map(|p| p.xyz[1]).filter(|y| *y > 0.0 && y.is_finite()).collect();
+    lum.sort_by(f64::total_cmp);
+    let median = lum.get(lum.len() / 2).copied().unwrap_or(1.0);
+    let scale = 0.25 / median * 2f64.powf(exposure_ev);
+    let balance = match white_xyz {
+        Some(wh) => {
+            let rgb = xyz_to_linear_srgb(wh);
+            let m = rgb[1].max(1e-30);
+            [m / rgb[0].max(1e-30), 1.0, m / rgb[2].max(1e-30)]
+        }
+        None => [1.0; 3],
+    };
+    let mut buf = Vec::with_capacity(img.width * img.height * 3);
+    for p in &img.pixels {
+        let rgb = xyz_to_linear_srgb(p.xyz);
+        for c in 0..3 {
+            let v = (rgb[c] * balance[c] * scale).max(0.0);
+            buf.push((srgb_oetf(v / (1.0 + v)) * 255.0 + 0.5) as u8);
+        }
+    }
+    let im = image::RgbImage::from_raw(img.width as u32, img.height as u32, buf).ok_or_else(|| std::io::Error::other("image size"))?;
+    let mut png = Vec::new();
+    im.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map_err(|e| std::io::Error::other(e.to_string()))?;
+    crate::mie::cache::write_atomic(path, &png)
+}

@@ -1,0 +1,513 @@
+//! The path-tracing kernel at one wavelength: free-flight sampling by delta
+//! tracking and sun transmittance by ratio tracking against piecewise-
+//! constant shell majorants (Novák, Selle and Jarosz 2014; Novák et al.
+//! 2018), next-event estimation toward the sun as parallel light (the
+//! talk's "sunlight is approximated as a parallel light"), a visible sun disk
+//! for camera rays, a Lambertian ground, phase sampling from the tabulated
+//! Mie inverse CDFs, and Russian roulette.
+//!
+//! Radiance is relative to `Spectral::sun_irradiance` (pass 1 to get the
+//! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
+//! from `libm` (pure Rust), so the kernel rounds the same on every platform.
+
+use super::medium::{Medium, Phase, Spectral, SHELL_KM};
+use super::rng::Rng;
+use crate::atmosphere::Geometry;
+use glam::DVec3;
+use std::f64::consts::PI;
+
+/// Nudge past a boundary, km.
+const EPS_KM: f64 = 1e-9;
+/// Paths longer than this are cut (Russian roulette ends them long before).
+const MAX_BOUNCES: usize = 10_000;
+
+/// How a flight ended.
+enum Flight {
+    Escape,
+    Ground(DVec3),
+    Collision(DVec3),
+}
+
+/// Which estimator to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Estimator {
+    /// Delta tracking, phase sampling, next-event estimation with ratio
+    /// tracking, Russian roulette: what `sky render` ships.
+    Full,
+    /// The naive baseline for benchmarks: analog tracking, no next-event
+    /// estimation; light arrives only when a path escapes through the sun's
+    /// disk or hits the ground... which never sees the sun directly either,
+    /// so sunlight enters only through the disk.
+    Naive,
+}
+
+/// Everything fixed during a render, at one wavelength.
+pub struct Tracer<'a> {
+    pub medium: &'a Medium,
+    pub spectral: &'a Spectral,
+    /// Unit vector toward the sun.
+    pub sun_dir: DVec3,
+    /// cos of the sun's angular radius.
+    pub sun_cos_half: f64,
+    /// Radiance of the sun's disk relative to `sun_irradiance` (1/Ω).
+    pub sun_disk_radiance: f64,
+    pub estimator: Estimator,
+    /// Whether camera rays see the sun's disk.
+    pub sun_disk: bool,
+}
+
+#[inline]
+fn ln(x: f64) -> f64 {
+    libm::log(x)
+}
+
+impl<'a> Tracer<'a> {
+    pub fn new(medium: &'a Medium, spectral: &'a Spectral, sun_dir: DVec3, sun_angular_diameter_deg: f64, estimator: Estimator) -> Tracer<'a> {
+        let half = 0.5 * sun_angular_diameter_deg.to_radians();
+        let cos_half = libm::cos(half);
+        let omega = 2.0 * PI * (1.0 - cos_half);
+        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true }
+    }
+
+    pub fn with_sun_disk(mut self, visible: bool) -> Self {
+        self.sun_disk = visible;
+        self
+    }
+
+    /// A point at `altitude_km` above the origin of the horizontal plane.
+    pub fn observer(&self, altitude_km: f64) -> DVec3 {
+        match self.medium.geometry {
+            Geometry::Spherical => DVec3::new(0.0, 0.0, self.medium.radius_km + altitude_km),
+            Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
+        }
+    }
+
+    #[inline]
+    fn altitude(&self, p: DVec3) -> f64 {
+        match self.medium.geometry {
+            Geometry::Spherical => p.length() - self.medium.radius_km,
+            Geometry::PlaneParallel => p.z,
+        }
+    }
+
+    #[inline]
+    fn up(&self, p: DVec3) -> DVec3 {
+        match self.medium.geometry {
+            Geometry::Spherical => p.normalize(),
+            Geometry::PlaneParallel => DVec3::Z,
+        }
+    }
+
+    /// Distance along `d` from `p` to the altitude `z_km` boundary (sphere
+    /// or plane), if the ray reaches it; `leaving_upward` picks the far root.
+    fn distance_to_altitude(&self, p: DVec3, d: DVec3, z_km: f64, upward: bool) -> Option<f64> {
+        match self.medium.geometry {
+            Geometry::PlaneParallel => {
+                let t = (z_km - p.z) / d.z;
+                (t > 0.0 && t.is_finite()).then_some(t)
+            }
+            Geometry::Spherical => {
+                let r = self.medium.radius_km + z_km;
+                let b = p.dot(d);
+                let c = p.length_squared() - r * r;
+                let disc = b * b - c;
+                if disc < 0.0 {
+                    return None;
+                }
+                let s = disc.sqrt();
+                if upward {
+                    let t = -b + s;
+                    (t > 0.0).then_some(t)
+                } else {
+                    // Nearer root, only if the sphere is ahead.
+                    let t = -b - s;
+                    (t > 0.0).then_some(t)
+                }
+            }
+        }
+    }
+
+    /// The shell at `p` and the distance along `d` to its boundary, with
+    /// what lies beyond: Some(next shell) or None for space (ground is
+    /// reported as shell usize::MAX).
+    fn shell_exit(&self, p: DVec3, d: DVec3) -> (usize, f64, Option<usize>) {
+        let top = self.medium.top_km;
+        let shells = self.medium.shells();
+        let z = self.altitude(p).clamp(0.0, top);
+        let s = ((z / SHELL_KM) as usize).min(shells - 1);
+        let lo = s as f64 * SHELL_KM;
+        let hi = ((s + 1) as f64 * SHELL_KM).min(top);
+        let t_up = self.distance_to_altitude(p, d, hi, true).unwrap_or(f64::INFINITY);
+        let t_down = self.distance_to_altitude(p, d, lo, false).unwrap_or(f64::INFINITY);
+        if t_down < t_up {
+            (s, t_down, Some(if s == 0 { usize::MAX } else { s - 1 }))
+        } else if s + 1 >= shells {
+            (s, t_up, None)
+        } else {
+            (s, t_up, Some(s + 1))
+        }
+    }
+
+    /// Delta tracking from `p` along `d`.
+    fn fly(&self, mut p: DVec3, d: DVec3, rng: &mut Rng) -> Flight {
+        for _ in 0..1_000_000 {
+            let (s, t_exit, next) = self.shell_exit(p, d);
+            let m = self.spectral.majorant[s];
+            if m > 0.0 {
+                let t = -ln(1.0 - rng.uniform()) / m;
+                if t < t_exit {
+                    p += d * t;
+                    let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(p));
+                    if rng.uniform() * m < sigma_t {
+                        return Flight::Collision(p);
+                    }
+                    continue;
+                }
+            }
+            if !t_exit.is_finite() {
+                return Flight::Escape;
+            }
+            p += d * t_exit;
+            match next {
+                None => return Flight::Escape,
+                Some(usize::MAX) => return Flight::Ground(p),
+                Some(_) => p += d * EPS_KM,
+            }
+        }
+        Flight::Escape
+    }
+
+    /// The majorant segments along the ray from `p` to where it leaves the
+    /// atmosphere or meets the ground: (start, end, majorant) in km and
+    /// km⁻¹, and the distance to the ground if it is met.
+    fn segments(&self, mut p: DVec3, d: DVec3, out: &mut Vec<(f64, f64, f64)>) -> Option<f64> {
+        out.clear();
+        let mut t = 0.0;
+        for _ in 0..1_000_000 {
+            let (s, t_exit, next) = self.shell_exit(p, d);
+            if !t_exit.is_finite() {
+                return None;
+            }
+            out.push((t, t + t_exit, self.spectral.majorant[s]));
+            t += t_exit;
+            p += d * t_exit;
+            match next {
+                None => return None,
+                Some(usize::MAX) => return Some(t),
+                Some(_) => {
+                    p += d * EPS_KM;
+                    t += EPS_KM;
+                }
+            }
+        }
+        None
+    }
+
+    /// Flight with a forced collision (a standard variance reduction for
+    /// optically thin media): the collision distance is drawn from the
+    /// majorant's free-path density truncated to the ray, q(t) = m(t)
+    /// e^(−τ_m(t)) / (1 − e^(−τ_m)), and weighted by σ_t(t) T(0, t) / q(t)
+    /// with T estimated by ratio tracking, so the estimate stays unbiased.
+    /// When the ray meets the ground, the collision branch is taken with
+    /// probability P = 1 − e^(−τ_m) (at least 0.1) and the ground branch
+    /// otherwise, weighted by T(0, t_ground) / (1 − P). Returns the event
+    /// and the weight.
+    fn fly_forced(&self, p: DVec3, d: DVec3, rng: &mut Rng, segs: &mut Vec<(f64, f64, f64)>) -> (Flight, f64) {
+        let ground = self.segments(p, d, segs);
+        let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
+        if tau_m <= 0.0 {
+            return match ground {
+                None => (Flight::Escape, 1.0),
+                Some(t) => (Flight::Ground(p + d * t), 1.0),
+            };
+        }
+        let p_coll = match ground {
+            None => 1.0,
+            Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
+        };
+        if ground.is_none() || rng.uniform() < p_coll {
+            // τ* from the truncated exponential on [0, τ_m).
+            let one_minus = -libm::expm1(-tau_m);
+            let tau_star = -libm::log1p(-rng.uniform() * one_minus);
+            let mut acc = 0.0;
+            let mut t = segs.last().map(|s| s.1).unwrap_or(0.0);
+            let mut m_at = 0.0;
+            for &(a, b, m) in segs.iter() {
+                let dt = (b - a) * m;
+                if m > 0.0 && acc + dt > tau_star {
+                    t = a + (tau_star - acc) / m;
+                    m_at = m;
+                    break;
+                }
+                acc += dt;
+            }
+            if m_at <= 0.0 {
+                return (Flight::Escape, 0.0);
+            }
+            let q = p + d * t;
+            let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(q));
+            if sigma_t <= 0.0 {
+                return (Flight::Collision(q), 0.0);
+            }
+            let tr = self.transmittance_to(p, d, t, rng);
+            let pdf = m_at * libm::exp(-tau_star) / one_minus;
+            (Flight::Collision(q), sigma_t * tr / (pdf * p_coll))
+        } else {
+            let t = ground.unwrap();
+            let tr = self.transmittance_to(p, d, t, rng);
+            (Flight::Ground(p + d * t), tr / (1.0 - p_coll))
+        }
+    }
+
+    /// Transmittance over the first `t_max` km of the ray, by ratio tracking
+    /// (with Russian roulette below 0.1).
+    fn transmittance_to(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
+        let mut tr = 1.0;
+        let mut remaining = t_max;
+        for _ in 0..1_000_000 {
+            if remaining <= 0.0 {
+                return tr;
+            }
+            let (s, t_exit, _) = self.shell_exit(p, d);
+            let span = t_exit.min(remaining);
+            let m = self.spectral.majorant[s];
+            let mut left = span;
+            if m > 0.0 {
+                loop {
+                    let t = -ln(1.0 - rng.uniform()) / m;
+                    if t >= left {
+                        break;
+                    }
+                    left -= t;
+                    p += d * t;
+                    let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(p));
+                    tr *= 1.0 - sigma_t / m;
+                    if tr < 0.1 {
+                        if rng.uniform() < 0.5 {
+                            return 0.0;
+                        }
+                        tr *= 2.0;
+                    }
+                }
+            }
+            p += d * (left + EPS_KM);
+            remaining -= span + EPS_KM;
+        }
+        tr
+    }
+
+    /// Transmittance from `p` to space along `d` by ratio tracking (0 if
+    /// the ray meets the ground), with Russian roulette below 0.1.
+    pub fn transmittance(&self, mut p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+        let mut tr = 1.0;
+        for _ in 0..1_000_000 {
+            let (s, t_exit, next) = self.shell_exit(p, d);
+            let m = self.spectral.majorant[s];
+            let mut left = t_exit;
+            if m > 0.0 {
+                loop {
+                    let t = -ln(1.0 - rng.uniform()) / m;
+                    if t >= left {
+                        break;
+                    }
+                    left -= t;
+                    p += d * t;
+                    let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(p));
+                    tr *= 1.0 - sigma_t / m;
+                    if tr < 0.1 {
+                        if rng.uniform() < 0.5 {
+                            return 0.0;
+                        }
+                        tr *= 2.0;
+                    }
+                }
+            }
+            if !t_exit.is_finite() {
+                return tr;
+            }
+            p += d * left;
+            match next {
+                None => return tr,
+                Some(usize::MAX) => return 0.0,
+                Some(_) => p += d * EPS_KM,
+            }
+        }
+        tr
+    }
+
+    /// Samples a direction from `phase` around `d`.
+    fn sample_phase(&self, phase: &Phase, d: DVec3, rng: &mut Rng) -> DVec3 {
+        let mu = match phase {
+            Phase::None => 1.0,
+            Phase::Table(t) => t.sample_mu(rng.uniform()),
+            Phase::HenyeyGreenstein { g } => sample_hg(*g, rng.uniform()),
+            Phase::CornetteShanks { g } => loop {
+                // Rejection from HG: p_CS / p_HG ∝ (1 + μ²) / 2 ≤ 1.
+                let mu = sample_hg(*g, rng.uniform());
+                if rng.uniform() * 2.0 < 1.0 + mu * mu {
+                    break mu;
+                }
+            },
+            Phase::Rayleigh { depolarization } => {
+                let gamma = depolarization / (2.0 - depolarization);
+                let (a, b) = (1.0 + 3.0 * gamma, 1.0 - gamma);
+                loop {
+                    let mu = 2.0 * rng.uniform() - 1.0;
+                    if rng.uniform() * (a + b) < a + b * mu * mu {
+                        break mu;
+                    }
+                }
+            }
+        };
+        let phi = 2.0 * PI * rng.uniform();
+        around(d, mu, phi)
+    }
+
+    /// One path sample of the radiance arriving at `origin` from direction
+    /// `-dir` (looking along `dir`), relative to the sun's irradiance.
+    pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> f64 {
+        let mut l = 0.0;
+        let naive = self.estimator == Estimator::Naive;
+        if !naive && self.sun_disk && dir.dot(self.sun_dir) >= self.sun_cos_half {
+            l += self.sun_disk_radiance * self.transmittance(origin, dir, rng);
+        }
+        let mut beta = 1.0;
+        let mut p = origin;
+        let mut d = dir;
+        let mut segs = Vec::new();
+        for depth in 0..MAX_BOUNCES {
+            // Forced collisions on the camera ray only: later bounces fly
+            // analogously, so escaping paths end instead of carrying ever
+            // smaller weights into Russian roulette.
+            let flight = if naive || depth > 0 {
+                self.fly(p, d, rng)
+            } else {
+                let (f, w) = self.fly_forced(p, d, rng, &mut segs);
+                beta *= w;
+                if beta <= 0.0 {
+                    break;
+                }
+                f
+            };
+            match flight {
+                Flight::Escape => {
+                    if naive && (self.sun_disk || depth > 0) && d.dot(self.sun_dir) >= self.sun_cos_half {
+                        l += beta * self.sun_disk_radiance;
+                    }
+                    break;
+                }
+                Flight::Ground(q) => {
+                    let a = self.spectral.ground_albedo;
+                    if a <= 0.0 {
+                        break;
+                    }
+                    let n = self.up(q);
+                    let q = q + n * EPS_KM;
+                    if !naive {
+                        let cos_s = n.dot(self.sun_dir);
+                        if cos_s > 0.0 {
+                            l += beta * a / PI * cos_s * self.transmittance(q, self.sun_dir, rng);
+                        }
+                    }
+                    beta *= a;
+                    d = cosine_hemisphere(n, rng);
+                    p = q;
+                }
+                Flight::Collision(q) => {
+                    let z = self.altitude(q);
+                    let sp = self.spectral;
+                    let k = sp.extinction.len();
+                    let mut sigma_t = 0.0;
+                    let mut sigma_s = 0.0;
+                    for i in 0..k {
+                        let e = sp.extinction[i] * self.medium.density(i, z);
+                        sigma_t += e;
+                        sigma_s += e * sp.albedo[i];
+                    }
+                    if sigma_s <= 0.0 || sigma_t <= 0.0 {
+                        break;
+                    }
+                    if naive {
+                        // Analog absorption.
+                        if rng.uniform() * sigma_t >= sigma_s {
+                            break;
+                        }
+                    } else {
+                        beta *= sigma_s / sigma_t;
+                    }
+                    // Pick the scatterer in proportion to its scattering coefficient.
+                    let mut pick = rng.uniform() * sigma_s;
+                    let mut which = k - 1;
+                    for i in 0..k {
+                        let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
+                        if pick < s {
+                            which = i;
+                            break;
+                        }
+                        pick -= s;
+                    }
+                    let phase = &sp.phase[which];
+                    if !naive {
+                        let t = self.transmittance(q, self.sun_dir, rng);
+                        if t > 0.0 {
+                            l += beta * phase.eval(d.dot(self.sun_dir)) * t;
+                        }
+                    }
+                    d = self.sample_phase(phase, d, rng);
+                    p = q;
+                }
+            }
+            // Russian roulette on the path throughput (unbiased).
+            if depth >= 3 {
+                let q = beta.min(0.95);
+                if rng.uniform() >= q {
+                    break;
+                }
+                beta /= q;
+            }
+        }
+        l * self.spectral.sun_irradiance
+    }
+}
+
+/// Henyey–Greenstein sampling of μ (Henyey and Greenstein 1941; pbrt-v4's
+/// SampleHenyeyGreenstein, written for μ = cos θ between the directions of
+/// travel).
+#[inline]
+pub fn sample_hg(g: f64, u: f64) -> f64 {
+    if g.abs() < 1e-3 {
+        return 1.0 - 2.0 * u;
+    }
+    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
+    ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
+}
+
+/// The direction at angle acos(μ) from `d`, rotated by φ about it.
+#[inline]
+pub fn around(d: DVec3, mu: f64, phi: f64) -> DVec3 {
+    let (t, b) = d.any_orthonormal_pair();
+    let s = (1.0 - mu * mu).max(0.0).sqrt();
+    (t * (s * libm::cos(phi)) + b * (s * libm::sin(phi)) + d * mu).normalize()
+}
+
+/// Cosine-weighted direction about the normal `n`.
+#[inline]
+fn cosine_hemisphere(n: DVec3, rng: &mut Rng) -> DVec3 {
+    let u1 = rng.uniform();
+    let phi = 2.0 * PI * rng.uniform();
+    let mu = u1.sqrt();
+    around(n, mu, phi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hg_sampling_mean_is_g() {
+        let n = 200_000;
+        let g = 0.7;
+        let m: f64 = (0..n).map(|i| sample_hg(g, (i as f64 + 0.5) / n as f64)).sum::<f64>() / n as f64;
+        assert!((m - g).abs() < 1e-3, "{m}");
+    }
+}
