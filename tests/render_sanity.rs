@@ -1,0 +1,158 @@
+//! Sanity checks of the path tracer that need no outside reference:
+//! Beer–Lambert for the direct beam (spherical planet), energy conservation
+//! with a white ground and no absorption, reciprocity, and determinism.
+
+use glam::DVec3;
+use sky::atmosphere::{optics, Atmosphere};
+use sky::mie::MieCache;
+use sky::render::camera::{direction_deg, Camera};
+use sky::render::medium::Medium;
+use sky::render::rng::Rng;
+use sky::render::tracer::{Estimator, Tracer};
+use sky::render::{self, Scene, Settings, WavelengthSampling};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn mean_se(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0);
+    (m, (var / n).sqrt())
+}
+
+/// With the sun at the zenith, the renderer's direct-beam transmittance
+/// (ratio tracking through the spherical shells) matches exp(−τ) from the
+/// optical depths `sky atmosphere inspect` reports, within 4 standard errors.
+#[test]
+fn direct_beam_follows_beer_lambert() {
+    let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
+    let cache = MieCache::new(None);
+    let medium = Medium::new(&atm, &cache);
+    for w in [400.0, 550.0, 700.0] {
+        let spec = medium.spectral(&atm, w, 1.0, 0.0, &cache);
+        let tracer = Tracer::new(&medium, &spec, DVec3::Z, 0.533, Estimator::Full);
+        let origin = tracer.observer(0.0);
+        let samples: Vec<f64> = (0..20_000).map(|k| tracer.transmittance(origin, DVec3::Z, &mut Rng::new(9, 0, k))).collect();
+        let (t, se) = mean_se(&samples);
+        let tau = optics::spectral_optics(&atm, w, &cache).total.optical_depth;
+        let expect = (-tau).exp();
+        assert!((t - expect).abs() < 4.0 * se + 1e-4, "{w} nm: T {t} ± {se} vs exp(-{tau}) = {expect}");
+    }
+}
+
+/// Energy conservation: a conservative slab (Rayleigh with ω = 1 and
+/// a non-absorbing Henyey–Greenstein haze) over a white Lambertian ground
+/// sends back to space everything the sun puts in: the upward flux at the
+/// top, π E[L] over cosine-weighted downward directions, equals μ0 F0.
+#[test]
+fn energy_is_conserved_with_a_white_ground() {
+    let text = std::fs::read_to_string(root().join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
+    let text = text.replace("single_scattering_albedo = 0.9", "single_scattering_albedo = 1.0").replace("albedo = 0.3", "albedo = 1.0");
+    assert!(text.contains("single_scattering_albedo = 1.0") && text.contains("albedo = 1.0"));
+    let atm = Atmosphere::from_str(&root().join("tests/atmospheres/white.toml"), &text).unwrap();
+    let cache = MieCache::new(None);
+    let medium = Medium::new(&atm, &cache);
+    let spec = medium.spectral(&atm, 450.0, 1.0, 1.0, &cache);
+    let sun_zenith = 60.0f64;
+    let sun = direction_deg(sun_zenith, 0.0);
+    let tracer = Tracer::new(&medium, &spec, sun, 0.533, Estimator::Full);
+    let origin = tracer.observer(atm.planet.top_km - 1e-6);
+    let n = 80_000u64;
+    let samples: Vec<f64> = (0..n)
+        .map(|k| {
+            let mut rng = Rng::new(5, 1, k);
+            // Cosine-weighted direction about −z.
+            let (u1, u2) = (rng.uniform(), rng.uniform());
+            let r = u1.sqrt();
+            let phi = 2.0 * std::f64::consts::PI * u2;
+            let d = DVec3::new(r * phi.cos(), r * phi.sin(), -(1.0 - u1).sqrt());
+            std::f64::consts::PI * tracer.radiance(origin, d, &mut rng)
+        })
+        .collect();
+    let (flux, se) = mean_se(&samples);
+    let expect = sun_zenith.to_radians().cos();
+    assert!((flux - expect).abs() < 4.0 * se, "upward flux {flux} ± {se}, expected {expect}");
+    assert!(se / expect < 0.01, "too noisy to be a test: {se}");
+}
+
+fn ground_radiance(atm: &Atmosphere, view: (f64, f64), sun_zenith: f64, spp: u32, seed: u64) -> (f64, f64) {
+    let settings = Settings {
+        camera: Camera::Directions(vec![view]),
+        width: 1,
+        height: 1,
+        sun_zenith_deg: sun_zenith,
+        sun_azimuth_deg: 0.0,
+        altitude_m: 0.0,
+        spp,
+        seed,
+        spectral_nm: vec![550.0],
+        xyz: false,
+        band_nm: 5.0,
+        wavelength_sampling: WavelengthSampling::Luminance,
+        estimator: Estimator::Full,
+        sun_disk: false,
+    };
+    let cache = MieCache::new(None);
+    let scene = Scene::new(atm, &settings, &cache, &|| {});
+    let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+    (img.pixels[0].spectral[0], img.pixels[0].spectral_stderr[0])
+}
+
+/// Reciprocity of diffuse transmission (Chandrasekhar 1950, §51: the
+/// transmission function T(μ, φ; μ0, φ0) is symmetric): in a plane-parallel
+/// slab whose composition does not change with height, over a black ground,
+/// the diffuse radiance at the ground satisfies μ_v L(μ_v; μ_s) =
+/// μ_s L(μ_s; μ_v) when view and sun zenith angles are swapped (same
+/// relative azimuth). A reflecting ground breaks this symmetry, so it is
+/// black here.
+#[test]
+fn reciprocity_spot_checks() {
+    let text = std::fs::read_to_string(root().join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap().replace("albedo = 0.3", "albedo = 0.0");
+    let atm = Atmosphere::from_str(&root().join("tests/atmospheres/black.toml"), &text).unwrap();
+    for (a, b, az) in [(30.0f64, 70.0f64, 90.0), (10.0, 50.0, 150.0)] {
+        let (l1, s1) = ground_radiance(&atm, (a, az), b, 30_000, 11);
+        let (l2, s2) = ground_radiance(&atm, (b, az), a, 30_000, 12);
+        let (ca, cb) = (a.to_radians().cos(), b.to_radians().cos());
+        let (r1, r2) = (l1 * ca, l2 * cb);
+        let se = ((s1 * ca).powi(2) + (s2 * cb).powi(2)).sqrt();
+        assert!((r1 - r2).abs() < 4.0 * se, "({a}, {b}, {az}): {r1} vs {r2} (se {se})");
+    }
+}
+
+/// A pixel's value depends only on (seed, pixel, sample): one thread or
+/// two, whole image or a subset, the numbers are the same to the bit.
+#[test]
+fn renders_are_deterministic_across_threads_and_splits() {
+    let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
+    let settings = Settings {
+        camera: Camera::Fisheye,
+        width: 9,
+        height: 7,
+        sun_zenith_deg: 80.0,
+        sun_azimuth_deg: 30.0,
+        altitude_m: 100.0,
+        spp: 8,
+        seed: 77,
+        spectral_nm: vec![500.0],
+        xyz: true,
+        band_nm: 47.0,
+        wavelength_sampling: WavelengthSampling::Tristimulus,
+        estimator: Estimator::Full,
+        sun_disk: true,
+    };
+    let cache = MieCache::new(None);
+    let scene = Scene::new(&atm, &settings, &cache, &|| {});
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+    let a = one.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
+    let b = two.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
+    assert!(a == b, "1 and 2 threads differ");
+    for i in [0, 5, 31, 62] {
+        assert!(render::render_pixel(&scene, &settings, i) == a.pixels[i], "pixel {i} alone differs");
+    }
+    assert!(a.pixels.iter().any(|p| p.xyz[1] > 0.0));
+}
