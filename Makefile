@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test demo bench plots regen-data regen-reference clean
+.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets validate
 
 all: build
 
@@ -41,3 +41,18 @@ regen-reference:
 
 clean:
 	rm -rf $(OUT)
+
+# The README's sunset images: clear and hazed skies toward the sun at sun
+# elevations 10, 2, 0 and -4 degrees (pinhole, 90 degree field of view).
+SUNSET_SIZE ?= 240x120
+SUNSET_SPP ?= 64
+sunsets: build
+	@mkdir -p docs/images
+	for atm in clear hazed; do \
+	  for elev in 10 2 0 -4; do \
+	    zen=$$((90 - $$elev)); \
+	    $(SKY) render atmospheres/$$atm.toml --camera pinhole --look-azimuth-deg 0 --look-elevation-deg 12 --fov-deg 90 \
+	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --wavelength-sampling tristimulus \
+	      --out $(OUT)/sunset_$${atm}_$${elev}.exr --png docs/images/sunset_$${atm}_$${elev}.png; \
+	  done; \
+	done

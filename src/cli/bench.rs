@@ -1,6 +1,11 @@
 //! `sky bench`: timings reported in the README.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use sky::atmosphere::Atmosphere;
+use sky::render::camera::Camera;
+use sky::render::tracer::Estimator;
+use sky::render::{self as rend, Scene, Settings, WavelengthSampling};
+use std::sync::atomic::AtomicBool;
 use serde_json::json;
 use sky::atmosphere::RefractiveIndex;
 use sky::mie::{self, phase, LogNormal};
@@ -27,6 +32,71 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The path tracer's efficiency: the time to reach 1 % relative RMSE over a
+    /// fixed set of sky directions at 550 nm, for the naive estimator (analog
+    /// tracking, one wavelength, no next-event estimation) and the shipped one,
+    /// measured in one run; reports their ratio
+    Render {
+        /// Atmosphere to render
+        #[arg(long, default_value = "atmospheres/clear.toml")]
+        atmosphere: PathBuf,
+        /// Samples per direction for the shipped estimator
+        #[arg(long, default_value_t = 20_000)]
+        spp: u32,
+        /// Samples per direction for the naive estimator
+        #[arg(long, default_value_t = 200_000)]
+        naive_spp: u32,
+        /// Machine-readable output
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// The benchmark's view directions (zenith, azimuth), sun at zenith 60°, azimuth 0.
+const BENCH_DIRECTIONS: [(f64, f64); 8] = [(0.0, 0.0), (30.0, 90.0), (45.0, 180.0), (60.0, 30.0), (70.0, 0.0), (80.0, 120.0), (85.0, 60.0), (88.0, 0.0)];
+
+struct Measured {
+    seconds: f64,
+    paths: f64,
+    mean: Vec<f64>,
+    rel_var: Vec<f64>,
+}
+
+fn measure(atm: &Atmosphere, estimator: Estimator, spp: u32, seed: u64) -> Measured {
+    let settings = Settings {
+        camera: Camera::Directions(BENCH_DIRECTIONS.to_vec()),
+        width: BENCH_DIRECTIONS.len(),
+        height: 1,
+        sun_zenith_deg: 60.0,
+        sun_azimuth_deg: 0.0,
+        altitude_m: 0.0,
+        spp,
+        seed,
+        spectral_nm: vec![550.0],
+        xyz: false,
+        band_nm: 5.0,
+        wavelength_sampling: WavelengthSampling::Luminance,
+        estimator,
+        sun_disk: true,
+    };
+    let cache = sky::mie::MieCache::from_env();
+    let scene = Scene::new(atm, &settings, &cache, &|| {});
+    let t = Instant::now();
+    let img = rend::render(&scene, &settings, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+    let seconds = t.elapsed().as_secs_f64();
+    let n = spp as f64;
+    let mean: Vec<f64> = img.pixels.iter().map(|p| p.spectral[0]).collect();
+    // Per-sample relative variance: (se² n) / mean².
+    let rel_var = img.pixels.iter().map(|p| (p.spectral_stderr[0] * p.spectral_stderr[0] * n) / (p.spectral[0] * p.spectral[0]).max(1e-300)).collect();
+    Measured { seconds, paths: n * BENCH_DIRECTIONS.len() as f64, mean, rel_var }
+}
+
+/// Seconds to reach a relative RMSE of 1 % averaged over the directions:
+/// n = mean(σ²/L²) / 1e-4 samples per direction, at the measured rate.
+fn time_to_one_percent(m: &Measured) -> f64 {
+    let mean_rel_var = m.rel_var.iter().sum::<f64>() / m.rel_var.len() as f64;
+    let n = mean_rel_var / 1e-4;
+    n * BENCH_DIRECTIONS.len() as f64 / (m.paths / m.seconds)
 }
 
 pub fn run(c: BenchCommand) -> Result<ExitCode> {
@@ -73,6 +143,41 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     grid.len(),
                     secs / n as f64
                 );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        BenchCommand::Render { atmosphere, spp, naive_spp, json } => {
+            let atm = Atmosphere::load(&atmosphere).map_err(anyhow::Error::new).with_context(|| format!("{}", atmosphere.display()))?;
+            let full = measure(&atm, Estimator::Full, spp, 1);
+            let naive = measure(&atm, Estimator::Naive, naive_spp, 2);
+            let t_full = time_to_one_percent(&full);
+            let t_naive = time_to_one_percent(&naive);
+            // Agreement of the two estimators, in combined standard errors.
+            let z: Vec<f64> = (0..BENCH_DIRECTIONS.len())
+                .map(|i| {
+                    let se_f = (full.rel_var[i] / spp as f64).sqrt() * full.mean[i];
+                    let se_n = (naive.rel_var[i] / naive_spp as f64).sqrt() * naive.mean[i];
+                    (full.mean[i] - naive.mean[i]) / (se_f * se_f + se_n * se_n).sqrt().max(1e-300)
+                })
+                .collect();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&json!({
+                        "benchmark": "render-efficiency", "atmosphere": atmosphere.display().to_string(),
+                        "directions": BENCH_DIRECTIONS.len(), "wavelength_nm": 550.0, "threads": rayon::current_num_threads(),
+                        "shipped": { "paths_per_second": full.paths / full.seconds, "relative_variance_per_sample": full.rel_var, "seconds_to_1pct_rmse": t_full },
+                        "naive": { "paths_per_second": naive.paths / naive.seconds, "relative_variance_per_sample": naive.rel_var, "seconds_to_1pct_rmse": t_naive },
+                        "speedup": t_naive / t_full,
+                        "agreement_z": z,
+                    }))?
+                );
+            } else {
+                println!("render efficiency, {} ({} directions at 550 nm, sun at 60 deg, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
+                println!("  shipped: {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", full.paths / full.seconds, t_full);
+                println!("  naive:   {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", naive.paths / naive.seconds, t_naive);
+                println!("  speed-up of the shipped estimator: {:.0}x", t_naive / t_full);
+                println!("  estimators agree within {:.1} combined standard errors (worst direction)", z.iter().fold(0.0f64, |a, b| a.max(b.abs())));
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -1,6 +1,7 @@
 //! The atmosphere as the path tracer sees it: every component's density
 //! rasterised on a 10 m altitude grid (linear between nodes), piecewise-
-//! constant majorants on 250 m altitude shells for delta and ratio
+//! constant majorants on altitude shells (250 m up to 20 km, 1 km to 40 km,
+//! 5 km above, where there is next to nothing) for delta and ratio
 //! tracking (Novák et al. 2014; Novák et al. 2018, §5), and per wavelength
 //! the cross-section, albedo and phase function of each component.
 
@@ -11,8 +12,17 @@ use std::sync::Arc;
 
 /// Altitude step of the density rasters, km.
 pub const GRID_STEP_KM: f64 = 0.01;
-/// Thickness of the majorant shells, km.
-pub const SHELL_KM: f64 = 0.25;
+/// The majorant shells' boundaries, km, up to `top_km`.
+fn shell_edges(top_km: f64) -> Vec<f64> {
+    let mut e = vec![0.0];
+    let mut z = 0.0f64;
+    while z < top_km - 1e-9 {
+        let step = if z < 20.0 - 1e-9 { 0.25 } else if z < 40.0 - 1e-9 { 1.0 } else { 5.0 };
+        z = (z + step).min(top_km);
+        e.push(z);
+    }
+    e
+}
 
 /// What scatters or absorbs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,6 +44,8 @@ pub struct Medium {
     density: Vec<Vec<f64>>,
     /// `shell_max[i][s]`: the maximum of `density[i]` over shell s.
     shell_max: Vec<Vec<f64>>,
+    /// Shell boundaries, km (shells + 1 of them).
+    pub shell_edges_km: Vec<f64>,
 }
 
 /// A phase function at one wavelength.
@@ -102,21 +114,21 @@ impl Medium {
             let _ = cache;
             density.push(raster(1.0, a.profile));
         }
-        let shells = (top / SHELL_KM).ceil() as usize;
-        let per_shell = (SHELL_KM / GRID_STEP_KM).round() as usize;
+        let edges = shell_edges(top);
         let shell_max = density
             .iter()
             .map(|d| {
-                (0..shells)
-                    .map(|s| {
-                        let lo = s * per_shell;
-                        let hi = ((s + 1) * per_shell).min(d.len() - 1);
+                edges
+                    .windows(2)
+                    .map(|w| {
+                        let lo = ((w[0] / GRID_STEP_KM).floor() as usize).min(d.len() - 1);
+                        let hi = ((w[1] / GRID_STEP_KM).ceil() as usize).min(d.len() - 1);
                         d[lo..=hi].iter().cloned().fold(0.0, f64::max)
                     })
                     .collect()
             })
             .collect();
-        Medium { geometry: atm.planet.geometry, radius_km: atm.planet.radius_km, top_km: top, names, kinds, density, shell_max }
+        Medium { geometry: atm.planet.geometry, radius_km: atm.planet.radius_km, top_km: top, names, kinds, density, shell_max, shell_edges_km: edges }
     }
 
     pub fn components(&self) -> usize {
@@ -124,7 +136,14 @@ impl Medium {
     }
 
     pub fn shells(&self) -> usize {
-        self.shell_max.first().map(|s| s.len()).unwrap_or(0)
+        self.shell_edges_km.len() - 1
+    }
+
+    /// The shell holding altitude `z_km` (clamped to the atmosphere).
+    #[inline]
+    pub fn shell_of(&self, z_km: f64) -> usize {
+        let e = &self.shell_edges_km;
+        (e.partition_point(|&x| x <= z_km).max(1) - 1).min(e.len() - 2)
     }
 
     /// Density of component `i` at altitude `z_km` (linear on the raster, 0 outside).

@@ -10,7 +10,7 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
-use super::medium::{Medium, Phase, Spectral, SHELL_KM};
+use super::medium::{Medium, Phase, Spectral};
 use super::rng::Rng;
 use crate::atmosphere::Geometry;
 use glam::DVec3;
@@ -134,9 +134,9 @@ impl<'a> Tracer<'a> {
         let top = self.medium.top_km;
         let shells = self.medium.shells();
         let z = self.altitude(p).clamp(0.0, top);
-        let s = ((z / SHELL_KM) as usize).min(shells - 1);
-        let lo = s as f64 * SHELL_KM;
-        let hi = ((s + 1) as f64 * SHELL_KM).min(top);
+        let s = self.medium.shell_of(z);
+        let lo = self.medium.shell_edges_km[s];
+        let hi = self.medium.shell_edges_km[s + 1];
         let t_up = self.distance_to_altitude(p, d, hi, true).unwrap_or(f64::INFINITY);
         let t_down = self.distance_to_altitude(p, d, lo, false).unwrap_or(f64::INFINITY);
         if t_down < t_up {
