@@ -32,6 +32,16 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The denoiser's error against a converged render: a 64x32 view toward
+    /// a sun 5 degrees high, rendered at --spp and at --reference-spp
+    Denoise {
+        #[arg(long, default_value = "atmospheres/clear.toml")]
+        atmosphere: PathBuf,
+        #[arg(long, default_value_t = 32)]
+        spp: u32,
+        #[arg(long, default_value_t = 2048)]
+        reference_spp: u32,
+    },
     /// The path tracer's efficiency: the time to reach 1 % relative RMSE over a
     /// fixed set of sky directions at 550 nm, for the naive estimator (analog
     /// tracking, one wavelength, no next-event estimation) and the shipped one,
@@ -50,6 +60,44 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+}
+
+fn sunset_settings(spp: u32, seed: u64) -> Settings {
+    Settings {
+        camera: Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: 12.0, fov_deg: 90.0 },
+        width: 64,
+        height: 32,
+        sun_zenith_deg: 85.0,
+        sun_azimuth_deg: 0.0,
+        altitude_m: 0.0,
+        spp,
+        seed,
+        spectral_nm: vec![],
+        xyz: true,
+        band_nm: 5.0,
+        wavelength_sampling: WavelengthSampling::Tristimulus,
+        estimator: Estimator::Full,
+        sun_disk: true,
+    }
+}
+
+/// Relative RMSE of Y, RMS chromaticity error and mean relative bias of Y
+/// against a reference, over pixels with light.
+fn image_error(img: &rend::Image, reference: &rend::Image) -> (f64, f64, f64) {
+    let (mut se, mut sc, mut bias, mut n) = (0.0, 0.0, 0.0, 0.0);
+    for (p, r) in img.pixels.iter().zip(&reference.pixels) {
+        if r.xyz[1] <= 0.0 {
+            continue;
+        }
+        let rel = (p.xyz[1] - r.xyz[1]) / r.xyz[1];
+        se += rel * rel;
+        bias += rel;
+        let a = sky::spectrum::chromaticity(p.xyz);
+        let b = sky::spectrum::chromaticity(r.xyz);
+        sc += (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2);
+        n += 1.0;
+    }
+    ((se / n).sqrt(), (sc / n).sqrt(), bias / n)
 }
 
 /// The benchmark's view directions (zenith, azimuth), sun at zenith 60°, azimuth 0.
@@ -144,6 +192,27 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     secs / n as f64
                 );
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        BenchCommand::Denoise { atmosphere, spp, reference_spp } => {
+            let atm = Atmosphere::load(&atmosphere).map_err(anyhow::Error::new).with_context(|| format!("{}", atmosphere.display()))?;
+            let cache = sky::mie::MieCache::from_env();
+            let low = sunset_settings(spp, 1);
+            let high = sunset_settings(reference_spp, 2);
+            let scene = Scene::new(&atm, &low, &cache, &|| {});
+            let cancel = AtomicBool::new(false);
+            let noisy = rend::render(&scene, &low, &cancel, &|| {}).expect("not cancelled");
+            let reference = rend::render(&scene, &high, &cancel, &|| {}).expect("not cancelled");
+            let den = rend::denoise::Denoise::default().apply(&noisy);
+            let (e_raw, c_raw, b_raw) = image_error(&noisy, &reference);
+            let (e_den, c_den, b_den) = image_error(&den, &reference);
+            println!("denoiser, {} at {spp} spp against {reference_spp} spp (64x32, sun 5 deg high):", atmosphere.display());
+            println!("  noisy:    Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_raw, c_raw, b_raw);
+            println!("  denoised: Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_den, c_den, b_den);
+            println!("  (the reference itself has Y relative standard error {:.4} on average)", {
+                let v: Vec<f64> = reference.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
+                v.iter().sum::<f64>() / v.len() as f64
+            });
             Ok(ExitCode::SUCCESS)
         }
         BenchCommand::Render { atmosphere, spp, naive_spp, json } => {

@@ -105,6 +105,9 @@ pub struct RenderArgs {
     /// Worker threads (default: all cores)
     #[arg(long)]
     threads: Option<usize>,
+    /// Denoise X, Y, Z with the standard-error-aware filter (the noisy image is kept in noisy.X/Y/Z)
+    #[arg(long)]
+    denoise: bool,
     /// Hide the sun's disk from camera rays (diffuse sky only)
     #[arg(long)]
     hide_sun_disk: bool,
@@ -244,10 +247,17 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         ("spp".to_string(), a.spp.to_string()),
         ("seed".to_string(), a.seed.to_string()),
         ("band_nm".to_string(), a.band_nm.to_string()),
+        ("denoised".to_string(), a.denoise.to_string()),
         ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2); spectral: W m^-2 sr^-1 nm^-1".to_string()),
     ];
+    let (image, noisy) = if a.denoise {
+        let d = render::denoise::Denoise::default().apply(&image);
+        (d, Some(image))
+    } else {
+        (image, None)
+    };
     if let Some(o) = &a.out {
-        output::write_exr(o, &image, &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
+        output::write_exr(o, &image, noisy.as_ref(), &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
     }
     if let Some(p) = &a.png {
         let sun_xyz = sky::spectrum::spectrum_to_xyz(&atm.sun.irradiance_w_m2_nm);

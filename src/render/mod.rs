@@ -12,6 +12,7 @@
 //! W m⁻² sr⁻¹ nm⁻¹.
 
 pub mod camera;
+pub mod denoise;
 pub mod medium;
 pub mod output;
 pub mod rng;

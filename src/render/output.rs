@@ -10,13 +10,20 @@ use std::path::Path;
 pub type Metadata = Vec<(String, String)>;
 
 /// Writes the image as a single-layer OpenEXR with f32 channels.
-pub fn write_exr(path: &Path, img: &Image, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
+/// With `noisy`, X, Y, Z are the denoised values and the image before
+/// denoising is kept in `noisy.X`, `noisy.Y`, `noisy.Z`.
+pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
     let (w, h) = (img.width, img.height);
     let chan = |name: String, f: &dyn Fn(&super::PixelResult) -> f64| AnyChannel::new(name.as_str(), FlatSamples::F32(img.pixels.iter().map(|p| f(p) as f32).collect()));
     let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
     for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
         list.push(chan(name.to_string(), &move |p| p.xyz[c]));
         list.push(chan(format!("stderr.{name}"), &move |p| p.xyz_stderr[c]));
+    }
+    if let Some(raw) = noisy {
+        for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
+            list.push(AnyChannel::new(format!("noisy.{name}").as_str(), FlatSamples::F32(raw.pixels.iter().map(|p| p.xyz[c] as f32).collect())));
+        }
     }
     for (j, l) in spectral_nm.iter().enumerate() {
         list.push(chan(format!("spectral.{l}nm"), &move |p| p.spectral[j]));

@@ -74,8 +74,10 @@ impl<'a> Tracer<'a> {
         self
     }
 
-    /// A point at `altitude_km` above the origin of the horizontal plane.
+    /// A point at `altitude_km` above the origin of the horizontal plane
+    /// (at least 1 mm, so rays looking down meet the ground ahead of them).
     pub fn observer(&self, altitude_km: f64) -> DVec3 {
+        let altitude_km = altitude_km.max(1e-6);
         match self.medium.geometry {
             Geometry::Spherical => DVec3::new(0.0, 0.0, self.medium.radius_km + altitude_km),
             Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
@@ -448,9 +450,22 @@ impl<'a> Tracer<'a> {
                     }
                     let phase = &sp.phase[which];
                     if !naive {
+                        // Next-event estimation with the mixture of every
+                        // scatterer's phase function (weighted by its
+                        // scattering coefficient), not just the one picked
+                        // to continue the path: removes the noise of that
+                        // choice where a forward-peaked aerosol sees the sun.
                         let t = self.transmittance(q, self.sun_dir, rng);
                         if t > 0.0 {
-                            l += beta * phase.eval(d.dot(self.sun_dir)) * t;
+                            let mu_s = d.dot(self.sun_dir);
+                            let mut p_mix = 0.0;
+                            for i in 0..k {
+                                let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
+                                if s > 0.0 {
+                                    p_mix += s * sp.phase[i].eval(mu_s);
+                                }
+                            }
+                            l += beta * p_mix / sigma_s * t;
                         }
                     }
                     d = self.sample_phase(phase, d, rng);
