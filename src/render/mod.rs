@@ -185,6 +185,8 @@ const R2_A2: f64 = 0.569_840_290_998_053_2;
 #[derive(Debug, Clone, PartialEq)]
 pub struct PixelResult {
     pub xyz: [f64; 3],
+    /// The part of `xyz` that is the sun's disk seen directly.
+    pub xyz_direct: [f64; 3],
     pub xyz_stderr: [f64; 3],
     pub spectral: Vec<f64>,
     pub spectral_stderr: Vec<f64>,
@@ -229,8 +231,9 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     let sun = s.sun_direction();
     let nl = scene.line_optics.len();
     let mut xyz = [Moments::default(); 3];
+    let mut direct = [0.0f64; 3];
     let mut lines = vec![Moments::default(); nl];
-    let mut empty = PixelResult { xyz: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl] };
+    let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl] };
     let jitter = s.camera.jitters();
     let centre = s.camera.direction(x as f64 + 0.5, y as f64 + 0.5, s.width, s.height);
     if centre.is_none() && !jitter {
@@ -266,11 +269,12 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
                     any = true;
-                    let l = tracers_band[b].radiance(origin, d, &mut rng);
+                    let (ld, ls) = tracers_band[b].radiance_parts(origin, d, &mut rng);
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
                     for c in 0..3 {
-                        xyz[c].add(l * w[c] / p);
+                        xyz[c].add((ld + ls) * w[c] / p);
+                        direct[c] += ld * w[c] / p;
                     }
                 }
                 None => {
@@ -297,6 +301,7 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     }
     for c in 0..3 {
         empty.xyz[c] = xyz[c].mean();
+        empty.xyz_direct[c] = direct[c] / s.spp as f64;
         empty.xyz_stderr[c] = xyz[c].stderr();
     }
     for j in 0..nl {

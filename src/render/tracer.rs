@@ -368,10 +368,18 @@ impl<'a> Tracer<'a> {
     /// One path sample of the radiance arriving at `origin` from direction
     /// `-dir` (looking along `dir`), relative to the sun's irradiance.
     pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> f64 {
+        let (direct, scattered) = self.radiance_parts(origin, dir, rng);
+        direct + scattered
+    }
+
+    /// [`radiance`](Self::radiance) split into the sun's disk seen directly
+    /// (attenuated) and everything scattered or reflected.
+    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> (f64, f64) {
+        let mut direct = 0.0;
         let mut l = 0.0;
         let naive = self.estimator == Estimator::Naive;
         if !naive && self.sun_disk && dir.dot(self.sun_dir) >= self.sun_cos_half {
-            l += self.sun_disk_radiance * self.transmittance(origin, dir, rng);
+            direct = self.sun_disk_radiance * self.transmittance(origin, dir, rng);
         }
         let mut beta = 1.0;
         let mut p = origin;
@@ -481,7 +489,7 @@ impl<'a> Tracer<'a> {
                 beta /= q;
             }
         }
-        l * self.spectral.sun_irradiance
+        (direct * self.spectral.sun_irradiance, l * self.spectral.sun_irradiance)
     }
 }
 
