@@ -44,15 +44,19 @@ clean:
 
 # The README's sunset images: clear and hazed skies toward the sun at sun
 # elevations 10, 2, 0 and -4 degrees (pinhole, 90 degree field of view).
-SUNSET_SIZE ?= 240x120
-SUNSET_SPP ?= 64
+SUNSET_SIZE ?= 200x100
+SUNSET_SPP ?= 256
 sunsets: build
 	@mkdir -p docs/images
 	for atm in clear hazed; do \
 	  for elev in 10 2 0 -4; do \
 	    zen=$$((90 - $$elev)); \
 	    $(SKY) render atmospheres/$$atm.toml --camera pinhole --look-azimuth-deg 0 --look-elevation-deg 12 --fov-deg 90 \
-	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --wavelength-sampling tristimulus \
+	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --wavelength-sampling tristimulus --denoise \
 	      --out $(OUT)/sunset_$${atm}_$${elev}.exr --png docs/images/sunset_$${atm}_$${elev}.png; \
 	  done; \
 	done
+
+# The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
+validate: build
+	$(CARGO) test --release --locked --test disort -- --ignored --nocapture
