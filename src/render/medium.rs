@@ -208,3 +208,141 @@ impl Spectral {
         (0..self.extinction.len()).map(|i| self.extinction[i] * medium.density(i, z_km)).sum()
     }
 }
+
+/// Columns of every component along rays to the top of the atmosphere,
+/// tabulated against altitude and the cosine of the ray's zenith angle: the
+/// medium is spherically (or horizontally) symmetric, so the optical depth
+/// toward the sun from any point depends on those two numbers only, and the
+/// sun's transmittance is exp(−Σ_i e_i(λ) C_i(z, μ)) without tracking noise
+/// ("exact optical depth where the medium allows"). The columns are
+/// integrated by the trapezoid rule on steps of 0.2 % of the altitude plus
+/// 10 m, and interpolated bilinearly; rays that meet the ground are marked
+/// by an infinite column.
+#[derive(Debug, Clone)]
+pub struct ColumnTable {
+    z_km: Vec<f64>,
+    theta_steps: usize,
+    /// `columns[i][iz * (theta_steps + 1) + it]`, density units × km.
+    columns: Vec<Vec<f64>>,
+}
+
+const COLUMN_Z_NODES: usize = 128;
+const COLUMN_THETA_STEPS: usize = 1024;
+
+impl ColumnTable {
+    pub fn new(m: &Medium) -> ColumnTable {
+        use rayon::prelude::*;
+        let top = m.top_km;
+        let z_km: Vec<f64> = (0..COLUMN_Z_NODES).map(|i| top * (i as f64 / (COLUMN_Z_NODES - 1) as f64).powi(2)).collect();
+        let nt = COLUMN_THETA_STEPS + 1;
+        let k = m.components();
+        // One row of all components for each (altitude, angle) node.
+        let cells: Vec<Vec<f64>> = (0..z_km.len() * nt)
+            .into_par_iter()
+            .map(|cell| {
+                let (iz, it) = (cell / nt, cell % nt);
+                let theta = std::f64::consts::PI * it as f64 / COLUMN_THETA_STEPS as f64;
+                column_along(m, z_km[iz].min(top - 1e-9), libm::cos(theta), k)
+            })
+            .collect();
+        let columns = (0..k).map(|i| cells.iter().map(|c| c[i]).collect()).collect();
+        ColumnTable { z_km, theta_steps: COLUMN_THETA_STEPS, columns }
+    }
+
+    /// Optical depth to space from altitude `z_km` along a ray whose cosine
+    /// to the local vertical is `mu`, for per-component extinctions `e`
+    /// (km⁻¹ per density unit); infinite if the ray meets the ground.
+    pub fn optical_depth(&self, z_km: f64, mu: f64, e: &[f64]) -> f64 {
+        let z = z_km.clamp(0.0, *self.z_km.last().unwrap());
+        let iz = (self.z_km.partition_point(|&v| v <= z).max(1) - 1).min(self.z_km.len() - 2);
+        let fz = (z - self.z_km[iz]) / (self.z_km[iz + 1] - self.z_km[iz]);
+        let t = libm::acos(mu.clamp(-1.0, 1.0)) / std::f64::consts::PI * self.theta_steps as f64;
+        let it = (t as usize).min(self.theta_steps - 1);
+        let ft = t - it as f64;
+        let nt = self.theta_steps + 1;
+        let mut tau = 0.0;
+        for (i, col) in self.columns.iter().enumerate() {
+            if e[i] == 0.0 {
+                continue;
+            }
+            let c00 = col[iz * nt + it];
+            let c01 = col[iz * nt + it + 1];
+            let c10 = col[(iz + 1) * nt + it];
+            let c11 = col[(iz + 1) * nt + it + 1];
+            if !(c00.is_finite() && c01.is_finite() && c10.is_finite() && c11.is_finite()) {
+                // Next to the shadow of the ground: the nearest node decides.
+                let c = [[c00, c01], [c10, c11]][(fz > 0.5) as usize][(ft > 0.5) as usize];
+                if !c.is_finite() {
+                    return f64::INFINITY;
+                }
+                tau += e[i] * c;
+                continue;
+            }
+            let c = (1.0 - fz) * ((1.0 - ft) * c00 + ft * c01) + fz * ((1.0 - ft) * c10 + ft * c11);
+            tau += e[i] * c;
+        }
+        tau
+    }
+}
+
+/// ∫ density ds from altitude `z0` along direction cosine `mu` to the top,
+/// for every component; infinite if the ray meets the ground.
+fn column_along(m: &Medium, z0: f64, mu: f64, k: usize) -> Vec<f64> {
+    let mut out = vec![0.0; k];
+    let (r0, top_r) = match m.geometry {
+        Geometry::Spherical => (m.radius_km + z0, m.radius_km + m.top_km),
+        Geometry::PlaneParallel => (0.0, 0.0),
+    };
+    let altitude_at = |s: f64| -> f64 {
+        match m.geometry {
+            Geometry::Spherical => (r0 * r0 + 2.0 * r0 * mu * s + s * s).sqrt() - m.radius_km,
+            Geometry::PlaneParallel => z0 + mu * s,
+        }
+    };
+    // Length of the ray inside the atmosphere, or None if it meets the ground.
+    let length = match m.geometry {
+        Geometry::Spherical => {
+            let r_g = m.radius_km;
+            let disc_g = r0 * r0 * (mu * mu - 1.0) + r_g * r_g;
+            if mu < 0.0 && disc_g >= 0.0 && z0 > 0.0 {
+                return vec![f64::INFINITY; k];
+            }
+            if mu < 0.0 && z0 <= 0.0 {
+                return vec![f64::INFINITY; k];
+            }
+            -r0 * mu + (r0 * r0 * (mu * mu - 1.0) + top_r * top_r).sqrt()
+        }
+        Geometry::PlaneParallel => {
+            if mu <= 0.0 {
+                return vec![f64::INFINITY; k];
+            }
+            // Exactly the vertical column above z0 divided by μ.
+            let mut z = z0;
+            let mut prev: Vec<f64> = (0..k).map(|i| m.density(i, z)).collect();
+            while z < m.top_km {
+                let dz = (0.01 + 0.002 * z).min(m.top_km - z);
+                z += dz;
+                for i in 0..k {
+                    let d = m.density(i, z);
+                    out[i] += 0.5 * (prev[i] + d) * dz;
+                    prev[i] = d;
+                }
+            }
+            return out.into_iter().map(|c| c / mu).collect();
+        }
+    };
+    let mut s = 0.0;
+    let mut prev: Vec<f64> = (0..k).map(|i| m.density(i, z0)).collect();
+    while s < length {
+        let z = altitude_at(s);
+        let ds = (0.01 + 0.002 * z.max(0.0)).min(length - s);
+        s += ds;
+        let z1 = altitude_at(s);
+        for i in 0..k {
+            let d = m.density(i, z1);
+            out[i] += 0.5 * (prev[i] + d) * ds;
+            prev[i] = d;
+        }
+    }
+    out
+}

@@ -23,7 +23,7 @@ use crate::mie::MieCache;
 use crate::spectrum::Cmf;
 use camera::Camera;
 use glam::DVec3;
-use medium::{Medium, Spectral};
+use medium::{ColumnTable, Medium, Spectral};
 use rng::Rng;
 use std::sync::atomic::{AtomicBool, Ordering};
 use tracer::{Estimator, Tracer};
@@ -133,6 +133,7 @@ impl Bands {
 /// The prepared scene: medium, per-band and per-line optics.
 pub struct Scene {
     pub medium: Medium,
+    pub columns: ColumnTable,
     pub bands: Bands,
     pub band_optics: Vec<Spectral>,
     pub line_optics: Vec<Spectral>,
@@ -144,6 +145,7 @@ impl Scene {
     /// called after each wavelength, for progress.
     pub fn new(atm: &Atmosphere, s: &Settings, cache: &MieCache, on_step: &(dyn Fn() + Sync)) -> Scene {
         let medium = Medium::new(atm, cache);
+        let columns = ColumnTable::new(&medium);
         let bands = Bands::new(atm, s.band_nm, s.wavelength_sampling);
         let band_optics = if s.xyz {
             (0..bands.len())
@@ -165,7 +167,7 @@ impl Scene {
                 o
             })
             .collect();
-        Scene { medium, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
+        Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
     }
 
     /// How many wavelengths `new` evaluates (for a progress bar).
@@ -242,12 +244,12 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     let tracers_band: Vec<Tracer> = scene
         .band_optics
         .iter()
-        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk))
+        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns))
         .collect();
     let tracers_line: Vec<Tracer> = scene
         .line_optics
         .iter()
-        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk))
+        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns))
         .collect();
     let origin = match tracers_band.first().or(tracers_line.first()) {
         Some(t) => t.observer(s.altitude_m / 1000.0),

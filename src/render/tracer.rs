@@ -10,7 +10,7 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
-use super::medium::{Medium, Phase, Spectral};
+use super::medium::{ColumnTable, Medium, Phase, Spectral};
 use super::rng::Rng;
 use crate::atmosphere::Geometry;
 use glam::DVec3;
@@ -54,6 +54,9 @@ pub struct Tracer<'a> {
     pub estimator: Estimator,
     /// Whether camera rays see the sun's disk.
     pub sun_disk: bool,
+    /// Tabulated columns for transmittance toward space along rays that
+    /// do not descend (None: ratio tracking everywhere).
+    pub columns: Option<&'a ColumnTable>,
 }
 
 #[inline]
@@ -66,7 +69,25 @@ impl<'a> Tracer<'a> {
         let half = 0.5 * sun_angular_diameter_deg.to_radians();
         let cos_half = libm::cos(half);
         let omega = 2.0 * PI * (1.0 - cos_half);
-        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true }
+        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None }
+    }
+
+    pub fn with_columns(mut self, columns: &'a ColumnTable) -> Self {
+        self.columns = Some(columns);
+        self
+    }
+
+    /// Transmittance from `p` to space along `d`: from the column table when
+    /// the ray does not descend, else by ratio tracking.
+    pub fn transmittance_to_space(&self, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+        if let Some(c) = self.columns {
+            let mu = self.up(p).dot(d);
+            if mu >= 0.0 {
+                let tau = c.optical_depth(self.altitude(p), mu, &self.spectral.extinction);
+                return libm::exp(-tau);
+            }
+        }
+        self.transmittance(p, d, rng)
     }
 
     pub fn with_sun_disk(mut self, visible: bool) -> Self {
@@ -379,7 +400,7 @@ impl<'a> Tracer<'a> {
         let mut l = 0.0;
         let naive = self.estimator == Estimator::Naive;
         if !naive && self.sun_disk && dir.dot(self.sun_dir) >= self.sun_cos_half {
-            direct = self.sun_disk_radiance * self.transmittance(origin, dir, rng);
+            direct = self.sun_disk_radiance * self.transmittance_to_space(origin, dir, rng);
         }
         let mut beta = 1.0;
         let mut p = origin;
@@ -416,7 +437,7 @@ impl<'a> Tracer<'a> {
                     if !naive {
                         let cos_s = n.dot(self.sun_dir);
                         if cos_s > 0.0 {
-                            l += beta * a / PI * cos_s * self.transmittance(q, self.sun_dir, rng);
+                            l += beta * a / PI * cos_s * self.transmittance_to_space(q, self.sun_dir, rng);
                         }
                     }
                     beta *= a;
@@ -463,7 +484,7 @@ impl<'a> Tracer<'a> {
                         // scattering coefficient), not just the one picked
                         // to continue the path: removes the noise of that
                         // choice where a forward-peaked aerosol sees the sun.
-                        let t = self.transmittance(q, self.sun_dir, rng);
+                        let t = self.transmittance_to_space(q, self.sun_dir, rng);
                         if t > 0.0 {
                             let mu_s = d.dot(self.sun_dir);
                             let mut p_mix = 0.0;
