@@ -12,9 +12,7 @@
 use serde_json::Value;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
-use sky::render::camera::Camera;
-use sky::render::tracer::Estimator;
-use sky::render::{self, Scene, Settings, WavelengthSampling};
+use sky::render::{self, Scene, Settings};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -49,23 +47,8 @@ fn run(view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> u32) ->
                 }
             }
         }
-        let settings = Settings {
-            camera: Camera::Directions(dirs.clone()),
-            width: dirs.len(),
-            height: 1,
-            sun_zenith_deg: case["sun_zenith_deg"].as_f64().unwrap(),
-            sun_azimuth_deg: 0.0,
-            altitude_m: 0.0,
-            spp,
-            // A seed per case, so the cases' errors are independent.
-            seed: 2023 + case_index as u64,
-            spectral_nm: vec![l],
-            xyz: false,
-            band_nm: 5.0,
-            wavelength_sampling: WavelengthSampling::Luminance,
-            estimator: Estimator::Full,
-            sun_disk: false,
-        };
+        // A seed per case, so the cases' errors are independent.
+        let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, 2023 + case_index as u64, false);
         let cache = MieCache::new(None);
         let scene = Scene::new(&atm, &settings, &cache, &|| {});
         let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();

@@ -80,22 +80,7 @@ fn energy_is_conserved_with_a_white_ground() {
 }
 
 fn ground_radiance(atm: &Atmosphere, view: (f64, f64), sun_zenith: f64, spp: u32, seed: u64) -> (f64, f64) {
-    let settings = Settings {
-        camera: Camera::Directions(vec![view]),
-        width: 1,
-        height: 1,
-        sun_zenith_deg: sun_zenith,
-        sun_azimuth_deg: 0.0,
-        altitude_m: 0.0,
-        spp,
-        seed,
-        spectral_nm: vec![550.0],
-        xyz: false,
-        band_nm: 5.0,
-        wavelength_sampling: WavelengthSampling::Luminance,
-        estimator: Estimator::Full,
-        sun_disk: false,
-    };
+    let settings = Settings::directions(vec![view], sun_zenith, vec![550.0], spp, seed, false);
     let cache = MieCache::new(None);
     let scene = Scene::new(atm, &settings, &cache, &|| {});
     let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();

@@ -112,22 +112,7 @@ struct Measured {
 }
 
 fn measure(atm: &Atmosphere, estimator: Estimator, spp: u32, seed: u64) -> Measured {
-    let settings = Settings {
-        camera: Camera::Directions(BENCH_DIRECTIONS.to_vec()),
-        width: BENCH_DIRECTIONS.len(),
-        height: 1,
-        sun_zenith_deg: 60.0,
-        sun_azimuth_deg: 0.0,
-        altitude_m: 0.0,
-        spp,
-        seed,
-        spectral_nm: vec![550.0],
-        xyz: false,
-        band_nm: 5.0,
-        wavelength_sampling: WavelengthSampling::Luminance,
-        estimator,
-        sun_disk: true,
-    };
+    let settings = Settings { estimator, ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![550.0], spp, seed, true) };
     let cache = sky::mie::MieCache::from_env();
     let scene = Scene::new(atm, &settings, &cache, &|| {});
     let t = Instant::now();

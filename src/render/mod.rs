@@ -64,6 +64,28 @@ pub struct Settings {
 }
 
 impl Settings {
+    /// Spectral radiance at the ground toward a list of (zenith, azimuth)
+    /// directions in degrees, with the sun at azimuth 0 and its disk hidden
+    /// unless `sun_disk`: the setting of validations and benchmarks.
+    pub fn directions(dirs: Vec<(f64, f64)>, sun_zenith_deg: f64, spectral_nm: Vec<f64>, spp: u32, seed: u64, sun_disk: bool) -> Settings {
+        Settings {
+            width: dirs.len(),
+            height: 1,
+            camera: Camera::Directions(dirs),
+            sun_zenith_deg,
+            sun_azimuth_deg: 0.0,
+            altitude_m: 0.0,
+            spp,
+            seed,
+            spectral_nm,
+            xyz: false,
+            band_nm: 5.0,
+            wavelength_sampling: WavelengthSampling::Luminance,
+            estimator: Estimator::Full,
+            sun_disk,
+        }
+    }
+
     pub fn sun_direction(&self) -> DVec3 {
         camera::direction_deg(self.sun_zenith_deg, self.sun_azimuth_deg)
     }

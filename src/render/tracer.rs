@@ -284,15 +284,29 @@ impl<'a> Tracer<'a> {
 
     /// Transmittance over the first `t_max` km of the ray, by ratio tracking
     /// (with Russian roulette below 0.1).
-    fn transmittance_to(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
+    fn transmittance_to(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
+        self.ratio_track(p, d, t_max, rng)
+    }
+
+    /// Transmittance from `p` to space along `d` by ratio tracking (0 if
+    /// the ray meets the ground), with Russian roulette below 0.1.
+    pub fn transmittance(&self, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
+        self.ratio_track(p, d, f64::INFINITY, rng)
+    }
+
+    /// Ratio tracking (Novák et al. 2014) over the first `t_max` km of the
+    /// ray, or to space when `t_max` is infinite; 0 if the ground comes
+    /// first. Russian roulette below 0.1 keeps long, dark paths cheap.
+    fn ratio_track(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
         let mut tr = 1.0;
         let mut remaining = t_max;
         for _ in 0..1_000_000 {
-            if remaining <= 0.0 {
-                return tr;
-            }
-            let (s, t_exit, _) = self.shell_exit(p, d);
-            let span = t_exit.min(remaining);
+            let (s, t_exit, next) = self.shell_exit(p, d);
+            // A target at the boundary itself (the ground point of a flight)
+            // counts as reached: the tolerance absorbs the rounding of the
+            // shell-by-shell walk.
+            let target_first = remaining <= t_exit + 1e-7;
+            let span = if target_first { remaining.min(t_exit) } else { t_exit };
             let m = self.spectral.majorant[s];
             let mut left = span;
             if m > 0.0 {
@@ -313,46 +327,16 @@ impl<'a> Tracer<'a> {
                     }
                 }
             }
-            p += d * (left + EPS_KM);
-            remaining -= span + EPS_KM;
-        }
-        tr
-    }
-
-    /// Transmittance from `p` to space along `d` by ratio tracking (0 if
-    /// the ray meets the ground), with Russian roulette below 0.1.
-    pub fn transmittance(&self, mut p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
-        let mut tr = 1.0;
-        for _ in 0..1_000_000 {
-            let (s, t_exit, next) = self.shell_exit(p, d);
-            let m = self.spectral.majorant[s];
-            let mut left = t_exit;
-            if m > 0.0 {
-                loop {
-                    let t = -ln(1.0 - rng.uniform()) / m;
-                    if t >= left {
-                        break;
-                    }
-                    left -= t;
-                    p += d * t;
-                    let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(p));
-                    tr *= 1.0 - sigma_t / m;
-                    if tr < 0.1 {
-                        if rng.uniform() < 0.5 {
-                            return 0.0;
-                        }
-                        tr *= 2.0;
-                    }
-                }
-            }
-            if !t_exit.is_finite() {
+            if target_first || !t_exit.is_finite() {
                 return tr;
             }
-            p += d * left;
             match next {
                 None => return tr,
                 Some(usize::MAX) => return 0.0,
-                Some(_) => p += d * EPS_KM,
+                Some(_) => {
+                    p += d * (left + EPS_KM);
+                    remaining -= t_exit + EPS_KM;
+                }
             }
         }
         tr
