@@ -26,7 +26,8 @@ demo: build
 	$(SKY) atmosphere inspect atmospheres/clear.toml --plot $(OUT)/clear
 	$(SKY) atmosphere inspect atmospheres/hazed.toml --wavelengths 550 --plot $(OUT)/hazed
 	$(SKY) mie --m 1.33-1e-7i --lognormal 4.0,0.55 --wavelength-nm 550
-	@echo "plots in $(OUT)/clear and $(OUT)/hazed"
+	$(SKY) render atmospheres/clear.toml --camera fisheye --size 128x128 --sun-zenith-deg 80 --spp 256 --max-rel-error 0.05 --denoise --out $(OUT)/clear_fisheye.exr --png $(OUT)/clear_fisheye.png
+	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png"
 
 # Benchmarks reported in the README.
 bench: build

@@ -128,6 +128,7 @@ fn renders_are_deterministic_across_threads_and_splits() {
         wavelength_sampling: WavelengthSampling::Tristimulus,
         estimator: Estimator::Full,
         sun_disk: true,
+        max_rel_error: None,
     };
     let cache = MieCache::new(None);
     let scene = Scene::new(&atm, &settings, &cache, &|| {});
@@ -168,4 +169,46 @@ fn column_table_matches_inspect_and_ratio_tracking() {
         let from_table = (-table.optical_depth(z_km, d.z, &spec.extinction)).exp();
         assert!((t - from_table).abs() < 4.0 * se + 2e-3 * from_table, "z {z_km} km, zenith {zenith_deg}: tracked {t} ± {se}, table {from_table}");
     }
+}
+
+/// Adaptive sampling stops each pixel once its Y is known to the requested
+/// relative standard error (or at the sample limit), spends more samples
+/// where the noise is higher, and stays deterministic.
+#[test]
+fn adaptive_sampling_meets_its_target() {
+    let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
+    let target = 0.08;
+    let settings = Settings {
+        camera: Camera::Fisheye,
+        width: 10,
+        height: 10,
+        sun_zenith_deg: 75.0,
+        sun_azimuth_deg: 0.0,
+        altitude_m: 0.0,
+        spp: 2048,
+        seed: 3,
+        spectral_nm: vec![],
+        xyz: true,
+        band_nm: 47.0,
+        wavelength_sampling: WavelengthSampling::Tristimulus,
+        estimator: Estimator::Full,
+        sun_disk: true,
+        max_rel_error: Some(target),
+    };
+    let cache = MieCache::new(None);
+    let scene = Scene::new(&atm, &settings, &cache, &|| {});
+    let a = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+    let lit: Vec<_> = a.pixels.iter().filter(|p| p.samples > 0).collect();
+    assert!(lit.len() > 50);
+    for p in &lit {
+        assert!(p.samples >= render::ADAPTIVE_MIN_SPP.min(2048));
+        if p.samples < 2048 {
+            assert!(p.xyz_stderr[1] <= target * p.xyz[1], "stopped early at {} samples: {} ± {}", p.samples, p.xyz[1], p.xyz_stderr[1]);
+        }
+    }
+    let (lo, hi) = (lit.iter().map(|p| p.samples).min().unwrap(), lit.iter().map(|p| p.samples).max().unwrap());
+    assert!(hi > 2 * lo, "samples should follow the noise: {lo}..{hi}");
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let b = one.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
+    assert!(a == b);
 }

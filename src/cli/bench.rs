@@ -78,6 +78,7 @@ fn sunset_settings(spp: u32, seed: u64) -> Settings {
         wavelength_sampling: WavelengthSampling::Tristimulus,
         estimator: Estimator::Full,
         sun_disk: true,
+        max_rel_error: None,
     }
 }
 

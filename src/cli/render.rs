@@ -60,10 +60,10 @@ pub struct RenderArgs {
     /// Observer altitude above the ground in metres
     #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     altitude_m: f64,
-    /// Samples per pixel
-    #[arg(long, default_value_t = 64, conflicts_with = "max_rel_error")]
+    /// Samples per pixel (with --max-rel-error: the most a pixel may take)
+    #[arg(long, default_value_t = 64)]
     spp: u32,
-    /// Adaptive sampling to a relative standard error (not implemented yet)
+    /// Adaptive sampling: stop each pixel once the standard error of its Y is below this fraction of Y
     #[arg(long)]
     max_rel_error: Option<f64>,
     /// Random seed; a pixel's samples depend only on (seed, pixel, sample)
@@ -134,9 +134,10 @@ fn read_directions(path: &PathBuf) -> Result<Vec<(f64, f64)>> {
 }
 
 pub fn run(a: RenderArgs) -> Result<ExitCode> {
-    if a.max_rel_error.is_some() {
-        eprintln!("sky render: --max-rel-error (adaptive sampling) is not implemented yet; use --spp");
-        return Ok(ExitCode::from(super::EXIT_USAGE));
+    if let Some(e) = a.max_rel_error {
+        if !(e > 0.0 && e < 1.0) {
+            return usage(format!("--max-rel-error must be between 0 and 1, got {e}"));
+        }
     }
     if !(0.0..=120.0).contains(&a.sun_zenith_deg) {
         return usage(format!("--sun-zenith-deg must be between 0 and 120, got {}", a.sun_zenith_deg));
@@ -204,6 +205,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         },
         estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
         sun_disk: !a.hide_sun_disk,
+        max_rel_error: a.max_rel_error,
     };
     let cancel = Arc::new(AtomicBool::new(false));
     {
@@ -236,7 +238,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         }
     };
     let render_s = t0.elapsed().as_secs_f64();
-    let samples = n as f64 * a.spp as f64 * (1 + settings.spectral_nm.len()) as f64;
+    let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
+    let samples = taken * (1 + settings.spectral_nm.len()) as f64;
     let metadata = vec![
         ("version".to_string(), sky::VERSION.to_string()),
         ("atmosphere".to_string(), atm.path.display().to_string()),
@@ -245,6 +248,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         ("sun_azimuth_deg".to_string(), a.sun_azimuth_deg.to_string()),
         ("altitude_m".to_string(), a.altitude_m.to_string()),
         ("spp".to_string(), a.spp.to_string()),
+        ("max_rel_error".to_string(), a.max_rel_error.map(|e| e.to_string()).unwrap_or_else(|| "none".to_string())),
         ("seed".to_string(), a.seed.to_string()),
         ("band_nm".to_string(), a.band_nm.to_string()),
         ("denoised".to_string(), a.denoise.to_string()),
@@ -268,6 +272,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             "atmosphere": atm.path.display().to_string(),
             "atmosphere_hash": atm.content_hash,
             "width": width, "height": height, "spp": a.spp, "seed": a.seed,
+            "mean_samples_per_pixel": taken / n as f64,
             "sun_zenith_deg": a.sun_zenith_deg, "sun_azimuth_deg": a.sun_azimuth_deg,
             "prepare_seconds": prep_s, "render_seconds": render_s,
             "paths_per_second": samples / render_s.max(1e-9),
@@ -287,10 +292,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         println!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         eprintln!(
-            "rendered {}x{} at {} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
+            "rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
             width,
             height,
-            a.spp,
+            taken / n as f64,
             render_s,
             samples / render_s.max(1e-9),
             prep_s

@@ -61,7 +61,16 @@ pub struct Settings {
     /// Whether camera rays see the sun's disk (off for comparisons with
     /// codes that report only diffuse radiance).
     pub sun_disk: bool,
+    /// Adaptive sampling: stop a pixel once the standard error of its Y
+    /// (or of its first spectral channel when XYZ is off) is below this
+    /// fraction of its value; `spp` is then the most a pixel may take.
+    pub max_rel_error: Option<f64>,
 }
+
+/// Samples a pixel takes before adaptive sampling may stop it, and the
+/// interval at which it checks.
+pub const ADAPTIVE_MIN_SPP: u32 = 32;
+pub const ADAPTIVE_CHECK_SPP: u32 = 16;
 
 impl Settings {
     /// Spectral radiance at the ground toward a list of (zenith, azimuth)
@@ -83,6 +92,7 @@ impl Settings {
             wavelength_sampling: WavelengthSampling::Luminance,
             estimator: Estimator::Full,
             sun_disk,
+            max_rel_error: None,
         }
     }
 
@@ -214,6 +224,8 @@ pub struct PixelResult {
     pub xyz_stderr: [f64; 3],
     pub spectral: Vec<f64>,
     pub spectral_stderr: Vec<f64>,
+    /// Samples taken (fewer than `spp` where adaptive sampling stopped early).
+    pub samples: u32,
 }
 
 /// Running sums for a mean and its standard error.
@@ -257,7 +269,7 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     let mut xyz = [Moments::default(); 3];
     let mut direct = [0.0f64; 3];
     let mut lines = vec![Moments::default(); nl];
-    let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl] };
+    let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl], samples: 0 };
     let jitter = s.camera.jitters();
     let centre = s.camera.direction(x as f64 + 0.5, y as f64 + 0.5, s.width, s.height);
     if centre.is_none() && !jitter {
@@ -284,7 +296,21 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     // only, with far less colour noise than independent choices.
     let mut shift = Rng::new(s.seed, pixel as u64, u64::MAX);
     let (s_band, s_x, s_y) = (shift.uniform(), shift.uniform(), shift.uniform());
+    let mut taken = 0u32;
     for k in 0..s.spp as u64 {
+        // Adaptive sampling: a pure function of the samples so far, so the
+        // stopping point is as deterministic as the samples themselves.
+        if let Some(target) = s.max_rel_error {
+            let kk = k as u32;
+            if kk >= ADAPTIVE_MIN_SPP && kk % ADAPTIVE_CHECK_SPP == 0 {
+                let m = if s.xyz { &xyz[1] } else { &lines[0] };
+                let mean = m.mean();
+                if mean <= 0.0 || m.stderr() <= target * mean {
+                    break;
+                }
+            }
+        }
+        taken += 1;
         if s.xyz {
             let mut rng = Rng::new(s.seed, pixel as u64, k);
             let kf = k as f64;
@@ -325,13 +351,14 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     }
     for c in 0..3 {
         empty.xyz[c] = xyz[c].mean();
-        empty.xyz_direct[c] = direct[c] / s.spp as f64;
+        empty.xyz_direct[c] = direct[c] / taken.max(1) as f64;
         empty.xyz_stderr[c] = xyz[c].stderr();
     }
     for j in 0..nl {
         empty.spectral[j] = lines[j].mean();
         empty.spectral_stderr[j] = lines[j].stderr();
     }
+    empty.samples = taken;
     empty
 }
 

@@ -20,6 +20,7 @@ pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, spectral_nm: &
         list.push(chan(name.to_string(), &move |p| p.xyz[c]));
         list.push(chan(format!("stderr.{name}"), &move |p| p.xyz_stderr[c]));
     }
+    list.push(chan("samples".to_string(), &|p| p.samples as f64));
     if let Some(raw) = noisy {
         for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
             list.push(AnyChannel::new(format!("noisy.{name}").as_str(), FlatSamples::F32(raw.pixels.iter().map(|p| p.xyz[c] as f32).collect())));
