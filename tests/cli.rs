@@ -191,3 +191,25 @@ fn render_bad_flags_exit_2() {
     assert_eq!(o.status.code(), Some(1));
     assert!(!root().join("x.exr").exists());
 }
+
+#[test]
+fn ctrl_c_stops_a_render_and_writes_nothing() {
+    let c = tempfile::tempdir().unwrap();
+    let out = c.path().join("big.exr");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["render", "atmospheres/analytic-hg.toml", "--camera", "equirect", "--size", "512x256", "--sun-zenith-deg", "60", "--spp", "100000", "--band-nm", "47", "--out"])
+        .arg(&out)
+        .current_dir(root())
+        .env("SKY_CACHE_DIR", c.path())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // SIGINT, as Ctrl-C sends.
+    let _ = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    let status = child.wait().unwrap();
+    assert_eq!(status.code(), Some(130));
+    assert!(!out.exists());
+    let leftovers: Vec<_> = std::fs::read_dir(c.path()).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().starts_with(".tmp")).collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
