@@ -263,6 +263,12 @@ impl Moments {
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
 pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
+    render_pixel_cancellable(scene, s, pixel, &AtomicBool::new(false))
+}
+
+/// [`render_pixel`] that stops early (with a partial, discarded result)
+/// when `cancel` is set, so Ctrl-C does not wait for long pixels.
+pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
     let (x, y) = (pixel % s.width, pixel / s.width);
     let sun = s.sun_direction();
     let nl = scene.line_optics.len();
@@ -298,6 +304,9 @@ pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
     let (s_band, s_x, s_y) = (shift.uniform(), shift.uniform(), shift.uniform());
     let mut taken = 0u32;
     for k in 0..s.spp as u64 {
+        if k % 64 == 0 && cancel.load(Ordering::Relaxed) {
+            break;
+        }
         // Adaptive sampling: a pure function of the samples so far, so the
         // stopping point is as deterministic as the samples themselves.
         if let Some(target) = s.max_rel_error {
@@ -388,7 +397,10 @@ pub fn render(scene: &Scene, s: &Settings, cancel: &AtomicBool, on_pixel: &(dyn 
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
-            let r = render_pixel(scene, s, i);
+            let r = render_pixel_cancellable(scene, s, i, cancel);
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
             on_pixel();
             Some(r)
         })
