@@ -95,7 +95,7 @@ fn path_tracer_agrees_with_disort() {
 fn path_tracer_agrees_with_disort_full_grid() {
     let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
     let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
-    let st = run(&zs, &az, &|name| if name == "disort-rayleigh" { 100_000 } else { 100_000 });
+    let st = run(&zs, &az, &|_| 100_000);
     eprintln!("{} compared, worst {:.2} se, {} with se < 0.3 %", st.compared, st.worst_z, st.precise);
     assert!(st.beyond_3se.is_empty(), "beyond 3 standard errors:\n{}", st.beyond_3se.join("\n"));
     assert!(st.beyond_1pct_precise.is_empty(), "beyond 1 % where se < 0.3 %:\n{}", st.beyond_1pct_precise.join("\n"));

@@ -248,7 +248,11 @@ impl<'a> Tracer<'a> {
             None => 1.0,
             Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
         };
-        if ground.is_none() || rng.uniform() < p_coll {
+        let ground_branch = match ground {
+            Some(t) if rng.uniform() >= p_coll => Some(t),
+            _ => None,
+        };
+        if ground_branch.is_none() {
             // τ* from the truncated exponential on [0, τ_m).
             let one_minus = -libm::expm1(-tau_m);
             let tau_star = -libm::log1p(-rng.uniform() * one_minus);
@@ -276,7 +280,7 @@ impl<'a> Tracer<'a> {
             let pdf = m_at * libm::exp(-tau_star) / one_minus;
             (Flight::Collision(q), sigma_t * tr / (pdf * p_coll))
         } else {
-            let t = ground.unwrap();
+            let t = ground_branch.expect("ground branch");
             let tr = self.transmittance_to(p, d, t, rng);
             (Flight::Ground(p + d * t), tr / (1.0 - p_coll))
         }
