@@ -53,7 +53,7 @@ sunsets: build
 	  for elev in 10 2 0 -4; do \
 	    zen=$$((90 - $$elev)); \
 	    $(SKY) render atmospheres/$$atm.toml --camera pinhole --look-azimuth-deg 0 --look-elevation-deg 12 --fov-deg 90 \
-	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --wavelength-sampling tristimulus --denoise \
+	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --denoise \
 	      --out $(OUT)/sunset_$${atm}_$${elev}.exr --png docs/images/sunset_$${atm}_$${elev}.png; \
 	  done; \
 	done

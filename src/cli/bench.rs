@@ -42,6 +42,16 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 8192)]
         reference_spp: u32,
     },
+    /// Colour noise per second of the wavelength-sampling strategies
+    /// (luminance, tristimulus, hero), measured in one run over 8 sky
+    /// directions: mean over directions of the summed squared relative
+    /// standard errors of X, Y and Z, times the render time (lower is better)
+    Spectral {
+        #[arg(long, default_value = "atmospheres/clear.toml")]
+        atmosphere: PathBuf,
+        #[arg(long, default_value_t = 20_000)]
+        spp: u32,
+    },
     /// The path tracer's efficiency: the time to reach 1 % relative RMSE over a
     /// fixed set of sky directions at 550 nm, for the naive estimator (analog
     /// tracking, one wavelength, no next-event estimation) and the shipped one,
@@ -181,6 +191,37 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     grid.len(),
                     secs / n as f64
                 );
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        BenchCommand::Spectral { atmosphere, spp } => {
+            let atm = Atmosphere::load(&atmosphere).map_err(anyhow::Error::new).with_context(|| format!("{}", atmosphere.display()))?;
+            let cache = sky::mie::MieCache::from_env();
+            println!("colour noise per second, {} ({} directions, sun at 60 deg, {spp} spp, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
+            let mut results = Vec::new();
+            for (name, ws) in [("luminance", WavelengthSampling::Luminance), ("tristimulus", WavelengthSampling::Tristimulus), ("hero", WavelengthSampling::Hero)] {
+                let settings = Settings {
+                    xyz: true,
+                    spectral_nm: vec![],
+                    wavelength_sampling: ws,
+                    ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![], spp, 7, false)
+                };
+                let scene = Scene::new(&atm, &settings, &cache, &|| {});
+                let t = Instant::now();
+                let img = rend::render(&scene, &settings, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+                let secs = t.elapsed().as_secs_f64();
+                let noise: f64 = img
+                    .pixels
+                    .iter()
+                    .map(|p| (0..3).map(|c| (p.xyz_stderr[c] / p.xyz[c]).powi(2)).sum::<f64>())
+                    .sum::<f64>()
+                    / img.pixels.len() as f64;
+                println!("  {name:<12} {secs:>7.2} s   mean Σ(rel. se)² {noise:.3e}   noise x time {:.3e}", noise * secs);
+                results.push((name, noise * secs));
+            }
+            let best = results.iter().cloned().fold(("", f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
+            for (name, v) in &results {
+                println!("  {name:<12} {:.2}x the colour noise per second of {}", v / best.1, best.0);
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -34,6 +34,7 @@ enum CameraKind {
 enum Sampling {
     Luminance,
     Tristimulus,
+    Hero,
 }
 
 #[derive(clap::Args)]
@@ -99,8 +100,8 @@ pub struct RenderArgs {
     /// Width of the spectral bands in nm
     #[arg(long, default_value_t = 5.0)]
     band_nm: f64,
-    /// How samples pick their wavelength band
-    #[arg(long, value_enum, default_value = "luminance")]
+    /// How samples pick their wavelength bands (hero: four bands per path, the least colour noise per second; see `sky bench spectral`)
+    #[arg(long, value_enum, default_value = "hero")]
     wavelength_sampling: Sampling,
     /// Worker threads (default: all cores)
     #[arg(long)]
@@ -202,6 +203,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         wavelength_sampling: match a.wavelength_sampling {
             Sampling::Luminance => WavelengthSampling::Luminance,
             Sampling::Tristimulus => WavelengthSampling::Tristimulus,
+            Sampling::Hero => WavelengthSampling::Hero,
         },
         estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
         sun_disk: !a.hide_sun_disk,

@@ -17,7 +17,7 @@ use glam::DVec3;
 use std::f64::consts::PI;
 
 /// Nudge past a boundary, km.
-const EPS_KM: f64 = 1e-9;
+pub(crate) const EPS_KM: f64 = 1e-9;
 /// Paths longer than this are cut (Russian roulette ends them long before).
 const MAX_BOUNCES: usize = 10_000;
 
@@ -106,7 +106,7 @@ impl<'a> Tracer<'a> {
     }
 
     #[inline]
-    fn altitude(&self, p: DVec3) -> f64 {
+    pub(crate) fn altitude(&self, p: DVec3) -> f64 {
         match self.medium.geometry {
             Geometry::Spherical => p.length() - self.medium.radius_km,
             Geometry::PlaneParallel => p.z,
@@ -114,7 +114,7 @@ impl<'a> Tracer<'a> {
     }
 
     #[inline]
-    fn up(&self, p: DVec3) -> DVec3 {
+    pub(crate) fn up(&self, p: DVec3) -> DVec3 {
         match self.medium.geometry {
             Geometry::Spherical => p.normalize(),
             Geometry::PlaneParallel => DVec3::Z,
@@ -153,7 +153,7 @@ impl<'a> Tracer<'a> {
     /// The shell at `p` and the distance along `d` to its boundary, with
     /// what lies beyond: Some(next shell) or None for space (ground is
     /// reported as shell usize::MAX).
-    fn shell_exit(&self, p: DVec3, d: DVec3) -> (usize, f64, Option<usize>) {
+    pub(crate) fn shell_exit(&self, p: DVec3, d: DVec3) -> (usize, f64, Option<usize>) {
         let top = self.medium.top_km;
         let shells = self.medium.shells();
         let z = self.altitude(p).clamp(0.0, top);
@@ -203,7 +203,7 @@ impl<'a> Tracer<'a> {
     /// The majorant segments along the ray from `p` to where it leaves the
     /// atmosphere or meets the ground: (start, end, majorant) in km and
     /// km⁻¹, and the distance to the ground if it is met.
-    fn segments(&self, mut p: DVec3, d: DVec3, out: &mut Vec<(f64, f64, f64)>) -> Option<f64> {
+    pub(crate) fn segments(&self, mut p: DVec3, d: DVec3, out: &mut Vec<(f64, f64, f64)>) -> Option<f64> {
         out.clear();
         let mut t = 0.0;
         for _ in 0..1_000_000 {
@@ -347,7 +347,7 @@ impl<'a> Tracer<'a> {
     }
 
     /// Samples a direction from `phase` around `d`.
-    fn sample_phase(&self, phase: &Phase, d: DVec3, rng: &mut Rng) -> DVec3 {
+    pub(crate) fn sample_phase(&self, phase: &Phase, d: DVec3, rng: &mut Rng) -> DVec3 {
         let mu = match phase {
             Phase::None => 1.0,
             Phase::Table(t) => t.sample_mu(rng.uniform()),

@@ -1,0 +1,320 @@
+//! Hero-wavelength sampling (Wilkie et al. 2014, "Hero Wavelength Spectral
+//! Sampling"): each path carries four bands, the hero b0 drawn from the
+//! band distribution and three companions at b0 + kN/4 (mod N). The path is
+//! built with the hero's decisions; every band's contribution is weighted by
+//! the balance heuristic over the four ways the same set could have been
+//! drawn, Σ_j f_j(x) W_j / Σ_k p(b_k) P_k(x), where P_k is the density of
+//! the path had band k been the hero.
+//!
+//! To make the P_k computable the bands share one majorant (the largest of
+//! the four in each shell), so tentative collision points are common to all
+//! of them and only the accept/null decisions, the scatterer choice and the
+//! phase sampling differ between bands (the null-scattering path integral of
+//! Miller, Georgiev and Jarosz 2019 gives these densities).
+
+use super::rng::Rng;
+use super::tracer::{Tracer, EPS_KM};
+use glam::DVec3;
+use std::f64::consts::PI;
+
+pub const HERO_N: usize = 4;
+
+/// Four tracers of one medium at the four bands of a hero set (index 0 is the hero).
+pub struct HeroTracer<'a> {
+    pub t: [&'a Tracer<'a>; HERO_N],
+    majorant: Vec<f64>,
+}
+
+impl<'a> HeroTracer<'a> {
+    pub fn new(t: [&'a Tracer<'a>; HERO_N]) -> HeroTracer<'a> {
+        let shells = t[0].spectral.majorant.len();
+        let majorant = (0..shells).map(|s| t.iter().map(|x| x.spectral.majorant[s]).fold(0.0, f64::max)).collect();
+        HeroTracer { t, majorant }
+    }
+
+    fn sigmas(&self, z: f64) -> ([f64; HERO_N], [f64; HERO_N]) {
+        let m = self.t[0].medium;
+        let mut st = [0.0; HERO_N];
+        let mut ss = [0.0; HERO_N];
+        for (j, tr) in self.t.iter().enumerate() {
+            let sp = tr.spectral;
+            for i in 0..sp.extinction.len() {
+                let e = sp.extinction[i] * m.density(i, z);
+                st[j] += e;
+                ss[j] += e * sp.albedo[i];
+            }
+        }
+        (st, ss)
+    }
+
+    fn sigma_s_i(&self, j: usize, i: usize, z: f64) -> f64 {
+        let sp = self.t[j].spectral;
+        sp.extinction[i] * self.t[0].medium.density(i, z) * sp.albedo[i]
+    }
+
+    /// Ratio tracking of all four bands at once over `t_max` (or to space).
+    fn ratio_track(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> [f64; HERO_N] {
+        let h = self.t[0];
+        let mut tr = [1.0; HERO_N];
+        let mut remaining = t_max;
+        for _ in 0..1_000_000 {
+            let (s, t_exit, next) = h.shell_exit(p, d);
+            let target_first = remaining <= t_exit + 1e-7;
+            let span = if target_first { remaining.min(t_exit) } else { t_exit };
+            let m = self.majorant[s];
+            let mut left = span;
+            if m > 0.0 {
+                loop {
+                    let t = -libm::log(1.0 - rng.uniform()) / m;
+                    if t >= left {
+                        break;
+                    }
+                    left -= t;
+                    p += d * t;
+                    let (st, _) = self.sigmas(h.altitude(p));
+                    for j in 0..HERO_N {
+                        tr[j] *= 1.0 - st[j] / m;
+                    }
+                    if tr.iter().cloned().fold(0.0, f64::max) < 0.1 {
+                        if rng.uniform() < 0.5 {
+                            return [0.0; HERO_N];
+                        }
+                        for v in &mut tr {
+                            *v *= 2.0;
+                        }
+                    }
+                }
+            }
+            if target_first || !t_exit.is_finite() {
+                return tr;
+            }
+            match next {
+                None => return tr,
+                Some(usize::MAX) => return [0.0; HERO_N],
+                Some(_) => {
+                    p += d * (left + EPS_KM);
+                    remaining -= t_exit + EPS_KM;
+                }
+            }
+        }
+        tr
+    }
+
+    /// One hero path: the radiance estimate of each of the four bands
+    /// (relative to each band's solar irradiance, already MIS-weighted and
+    /// divided by the hero-selection densities `sel_pdf`), split into the
+    /// directly seen sun and the rest.
+    pub fn radiance(&self, origin: DVec3, dir: DVec3, sel_pdf: [f64; HERO_N], rng: &mut Rng) -> ([f64; HERO_N], [f64; HERO_N]) {
+        let h = self.t[0];
+        let mut direct = [0.0; HERO_N];
+        let mut res = [0.0; HERO_N];
+        let mut f = [1.0; HERO_N];
+        let mut pk = sel_pdf;
+        let sum = |a: &[f64; HERO_N]| a.iter().sum::<f64>();
+        if h.sun_disk && dir.dot(h.sun_dir) >= h.sun_cos_half {
+            let den = sum(&pk);
+            for j in 0..HERO_N {
+                direct[j] = f[j] * self.t[j].sun_disk_radiance * self.t[j].transmittance_to_space(origin, dir, rng) / den;
+            }
+        }
+        let s0 = sum(&f) / sum(&pk);
+        let mut p = origin;
+        let mut d = dir;
+        let mut segs: Vec<(f64, f64, f64)> = Vec::new();
+        for depth in 0..10_000 {
+            // --- flight ---
+            let mut collision: Option<DVec3> = None;
+            let mut ground: Option<DVec3> = None;
+            if depth == 0 {
+                // Forced first collision against the shared majorant.
+                let ground_t = h.segments(p, d, &mut segs);
+                for sg in segs.iter_mut() {
+                    let s = h.medium.shell_of(h.altitude(p + d * (0.5 * (sg.0 + sg.1)).min(1e12)).max(0.0));
+                    sg.2 = self.majorant[s];
+                }
+                let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
+                if tau_m <= 0.0 {
+                    match ground_t {
+                        None => break,
+                        Some(t) => ground = Some(p + d * t),
+                    }
+                } else {
+                    let p_coll = match ground_t {
+                        None => 1.0,
+                        Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
+                    };
+                    let take_ground = match ground_t {
+                        Some(_) => rng.uniform() >= p_coll,
+                        None => false,
+                    };
+                    if !take_ground {
+                        let one_minus = -libm::expm1(-tau_m);
+                        let tau_star = -libm::log1p(-rng.uniform() * one_minus);
+                        let mut acc = 0.0;
+                        let mut t = 0.0;
+                        let mut m_at = 0.0;
+                        for &(a, b, m) in segs.iter() {
+                            let dt = (b - a) * m;
+                            if m > 0.0 && acc + dt > tau_star {
+                                t = a + (tau_star - acc) / m;
+                                m_at = m;
+                                break;
+                            }
+                            acc += dt;
+                        }
+                        if m_at <= 0.0 {
+                            break;
+                        }
+                        let q = m_at * libm::exp(-tau_star) / one_minus * p_coll;
+                        let tr = self.ratio_track(p, d, t, rng);
+                        for k in 0..HERO_N {
+                            f[k] *= tr[k];
+                            pk[k] *= q;
+                        }
+                        collision = Some(p + d * t);
+                    } else {
+                        let t = ground_t.unwrap_or(0.0);
+                        let tr = self.ratio_track(p, d, t, rng);
+                        for k in 0..HERO_N {
+                            f[k] *= tr[k];
+                            pk[k] *= 1.0 - p_coll;
+                        }
+                        ground = Some(p + d * t);
+                    }
+                }
+            } else {
+                // Delta tracking against the shared majorant: null and real
+                // decisions are made with the hero's σ_t and enter every band's
+                // density. The tentative-point density is common and cancels.
+                let mut q = p;
+                loop {
+                    let (s, t_exit, next) = h.shell_exit(q, d);
+                    let m = self.majorant[s];
+                    if m > 0.0 {
+                        let t = -libm::log(1.0 - rng.uniform()) / m;
+                        if t < t_exit {
+                            q += d * t;
+                            let (st, _) = self.sigmas(h.altitude(q));
+                            if rng.uniform() * m < st[0] {
+                                for k in 0..HERO_N {
+                                    pk[k] *= st[k] / m;
+                                    f[k] /= m;
+                                }
+                                collision = Some(q);
+                                break;
+                            }
+                            for k in 0..HERO_N {
+                                let null = 1.0 - st[k] / m;
+                                pk[k] *= null;
+                                f[k] *= null;
+                            }
+                            continue;
+                        }
+                    }
+                    if !t_exit.is_finite() {
+                        break;
+                    }
+                    q += d * t_exit;
+                    match next {
+                        None => break,
+                        Some(usize::MAX) => {
+                            ground = Some(q);
+                            break;
+                        }
+                        Some(_) => q += d * EPS_KM,
+                    }
+                }
+                if collision.is_none() && ground.is_none() {
+                    break;
+                }
+            }
+            // --- vertex ---
+            if let Some(g) = ground {
+                let n = h.up(g);
+                let g = g + n * EPS_KM;
+                let cos_s = n.dot(h.sun_dir);
+                let den = sum(&pk);
+                if cos_s > 0.0 {
+                    for j in 0..HERO_N {
+                        let a = self.t[j].spectral.ground_albedo;
+                        if a > 0.0 {
+                            res[j] += f[j] * a / PI * cos_s * self.t[j].transmittance_to_space(g, h.sun_dir, rng) / den;
+                        }
+                    }
+                }
+                for j in 0..HERO_N {
+                    f[j] *= self.t[j].spectral.ground_albedo;
+                }
+                if f.iter().all(|v| *v <= 0.0) {
+                    break;
+                }
+                let u1 = rng.uniform();
+                let phi = 2.0 * PI * rng.uniform();
+                d = super::tracer::around(n, u1.sqrt(), phi);
+                p = g;
+            } else if let Some(c) = collision {
+                let z = h.altitude(c);
+                let (st, ss) = self.sigmas(z);
+                if ss[0] <= 0.0 {
+                    break;
+                }
+                // Next-event estimation with each band's mixture phase function.
+                let mu_s = d.dot(h.sun_dir);
+                let den = sum(&pk);
+                let k_comp = h.spectral.extinction.len();
+                for j in 0..HERO_N {
+                    if f[j] == 0.0 || ss[j] <= 0.0 {
+                        continue;
+                    }
+                    let t = self.t[j].transmittance_to_space(c, h.sun_dir, rng);
+                    if t > 0.0 {
+                        let mut c_j = 0.0;
+                        for i in 0..k_comp {
+                            let s = self.sigma_s_i(j, i, z);
+                            if s > 0.0 {
+                                c_j += s * self.t[j].spectral.phase[i].eval(mu_s);
+                            }
+                        }
+                        res[j] += f[j] * c_j * t / den;
+                    }
+                }
+                let _ = st;
+                // Pick the scatterer with the hero's scattering coefficients.
+                let mut pick = rng.uniform() * ss[0];
+                let mut which = k_comp - 1;
+                for i in 0..k_comp {
+                    let s = self.sigma_s_i(0, i, z);
+                    if pick < s {
+                        which = i;
+                        break;
+                    }
+                    pick -= s;
+                }
+                let nd = h.sample_phase(&h.spectral.phase[which], d, rng);
+                let mu = d.dot(nd);
+                for k in 0..HERO_N {
+                    let s = self.sigma_s_i(k, which, z);
+                    let pf = self.t[k].spectral.phase[which].eval(mu);
+                    f[k] *= s * pf;
+                    pk[k] *= if ss[k] > 0.0 { s / ss[k] * pf } else { 0.0 };
+                }
+                d = nd;
+                p = c;
+            }
+            // Russian roulette on a quantity symmetric in the four bands, so
+            // its probability is the same whichever band is the hero.
+            if depth >= 3 {
+                let s = sum(&f) / sum(&pk) / s0;
+                let q = s.min(0.95);
+                if !(q > 0.0) || rng.uniform() >= q {
+                    break;
+                }
+                for v in &mut pk {
+                    *v *= q;
+                }
+            }
+        }
+        let scale = |a: [f64; HERO_N]| -> [f64; HERO_N] { std::array::from_fn(|j| a[j] * self.t[j].spectral.sun_irradiance) };
+        (scale(direct), scale(res))
+    }
+}
