@@ -4,9 +4,11 @@
 //! by default). Optics are evaluated at each band's centre; the sun's
 //! spectrum and the colour matching functions are integrated exactly within
 //! the band at 1 nm, so the radiance solved per unit solar irradiance is
-//! weighted by W_b = 683 Σ_{λ∈b} E(λ) (x̄, ȳ, z̄)(λ) · 1 nm. Each sample picks
-//! one band in proportion to its luminance W_b.y (the talk's "wavelengths
-//! using spectral luminous efficiency") or to W_b.x + W_b.y + W_b.z.
+//! weighted by W_b = 683 Σ_{λ∈b} E(λ) (x̄, ȳ, z̄)(λ) · 1 nm. By default each
+//! sample carries four bands (hero wavelengths, see `hero`); the single-band
+//! alternatives pick one band in proportion to its luminance W_b.y (the
+//! talk's "wavelengths using spectral luminous efficiency") or to
+//! W_b.x + W_b.y + W_b.z (`sky bench spectral` compares the three).
 //! X, Y, Z are CIE 1931 tristimulus values of the sky radiance scaled by
 //! 683 lm/W, so Y is luminance in cd m⁻²; spectral channels are radiance in
 //! W m⁻² sr⁻¹ nm⁻¹.
