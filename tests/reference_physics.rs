@@ -8,7 +8,6 @@ use serde_json::Value;
 use sky::atmosphere::{optics, us1976, Atmosphere};
 use sky::mie::{self, LogNormal, MieCache};
 use sky::spectrum::{self, Cmf};
-use sky::table::Tabulated;
 use std::path::Path;
 
 fn load(name: &str) -> Value {
@@ -207,5 +206,4 @@ fn ozone_column_is_as_requested() {
     // Chappuis band: τ(603 nm) = σ · column ≈ 5.2e-21 cm² × 345 × 2.6867e16 cm⁻² ≈ 0.048.
     let tau = optics::spectral_optics(&atm, 603.0, &MieCache::new(None)).absorber_optical_depth;
     assert!((tau - 0.0483).abs() < 0.002, "{tau}");
-    let _ = Tabulated::constant(0.0);
 }

@@ -31,7 +31,7 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 fn direct_beam_follows_beer_lambert() {
     let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
     let cache = MieCache::new(None);
-    let medium = Medium::new(&atm, &cache);
+    let medium = Medium::new(&atm);
     for w in [400.0, 550.0, 700.0] {
         let spec = medium.spectral(&atm, w, 1.0, 0.0, &cache);
         let tracer = Tracer::new(&medium, &spec, DVec3::Z, 0.533, Estimator::Full);
@@ -55,7 +55,7 @@ fn energy_is_conserved_with_a_white_ground() {
     assert!(text.contains("single_scattering_albedo = 1.0") && text.contains("albedo = 1.0"));
     let atm = Atmosphere::from_str(&root().join("tests/atmospheres/white.toml"), &text).unwrap();
     let cache = MieCache::new(None);
-    let medium = Medium::new(&atm, &cache);
+    let medium = Medium::new(&atm);
     let spec = medium.spectral(&atm, 450.0, 1.0, 1.0, &cache);
     let sun_zenith = 60.0f64;
     let sun = direction_deg(sun_zenith, 0.0);
@@ -152,7 +152,7 @@ fn column_table_matches_inspect_and_ratio_tracking() {
     use sky::render::medium::ColumnTable;
     let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
     let cache = MieCache::new(None);
-    let medium = Medium::new(&atm, &cache);
+    let medium = Medium::new(&atm);
     let t0 = std::time::Instant::now();
     let table = ColumnTable::new(&medium);
     eprintln!("column table: {:.2} s", t0.elapsed().as_secs_f64());

@@ -13,7 +13,7 @@
 //! Miller, Georgiev and Jarosz 2019 gives these densities).
 
 use super::rng::Rng;
-use super::tracer::{Tracer, EPS_KM};
+use super::tracer::{choose_forced, Forced, Tracer, EPS_KM};
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -22,29 +22,31 @@ pub const HERO_N: usize = 4;
 /// Four tracers of one medium at the four bands of a hero set (index 0 is the hero).
 pub struct HeroTracer<'a> {
     pub t: [&'a Tracer<'a>; HERO_N],
-    majorant: Vec<f64>,
+    /// The shared majorant per shell (see [`shared_majorant`]).
+    majorant: &'a [f64],
+}
+
+/// The largest of the bands' majorants in each shell.
+pub fn shared_majorant(majorants: [&[f64]; HERO_N]) -> Vec<f64> {
+    (0..majorants[0].len()).map(|s| majorants.iter().map(|m| m[s]).fold(0.0, f64::max)).collect()
 }
 
 impl<'a> HeroTracer<'a> {
-    pub fn new(t: [&'a Tracer<'a>; HERO_N]) -> HeroTracer<'a> {
-        let shells = t[0].spectral.majorant.len();
-        let majorant = (0..shells).map(|s| t.iter().map(|x| x.spectral.majorant[s]).fold(0.0, f64::max)).collect();
+    pub fn new(t: [&'a Tracer<'a>; HERO_N], majorant: &'a [f64]) -> HeroTracer<'a> {
         HeroTracer { t, majorant }
     }
 
-    fn sigmas(&self, z: f64) -> ([f64; HERO_N], [f64; HERO_N]) {
+    fn sigma_t(&self, z: f64) -> [f64; HERO_N] {
         let m = self.t[0].medium;
-        let mut st = [0.0; HERO_N];
-        let mut ss = [0.0; HERO_N];
-        for (j, tr) in self.t.iter().enumerate() {
-            let sp = tr.spectral;
-            for i in 0..sp.extinction.len() {
-                let e = sp.extinction[i] * m.density(i, z);
-                st[j] += e;
-                ss[j] += e * sp.albedo[i];
-            }
-        }
-        (st, ss)
+        std::array::from_fn(|j| self.t[j].spectral.sigma_t(m, z))
+    }
+
+    fn sigma_s(&self, z: f64) -> [f64; HERO_N] {
+        let m = self.t[0].medium;
+        std::array::from_fn(|j| {
+            let sp = self.t[j].spectral;
+            (0..sp.extinction.len()).map(|i| sp.extinction[i] * m.density(i, z) * sp.albedo[i]).sum()
+        })
     }
 
     fn sigma_s_i(&self, j: usize, i: usize, z: f64) -> f64 {
@@ -53,51 +55,8 @@ impl<'a> HeroTracer<'a> {
     }
 
     /// Ratio tracking of all four bands at once over `t_max` (or to space).
-    fn ratio_track(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> [f64; HERO_N] {
-        let h = self.t[0];
-        let mut tr = [1.0; HERO_N];
-        let mut remaining = t_max;
-        for _ in 0..1_000_000 {
-            let (s, t_exit, next) = h.shell_exit(p, d);
-            let target_first = remaining <= t_exit + 1e-7;
-            let span = if target_first { remaining.min(t_exit) } else { t_exit };
-            let m = self.majorant[s];
-            let mut left = span;
-            if m > 0.0 {
-                loop {
-                    let t = -libm::log(1.0 - rng.uniform()) / m;
-                    if t >= left {
-                        break;
-                    }
-                    left -= t;
-                    p += d * t;
-                    let (st, _) = self.sigmas(h.altitude(p));
-                    for j in 0..HERO_N {
-                        tr[j] *= 1.0 - st[j] / m;
-                    }
-                    if tr.iter().cloned().fold(0.0, f64::max) < 0.1 {
-                        if rng.uniform() < 0.5 {
-                            return [0.0; HERO_N];
-                        }
-                        for v in &mut tr {
-                            *v *= 2.0;
-                        }
-                    }
-                }
-            }
-            if target_first || !t_exit.is_finite() {
-                return tr;
-            }
-            match next {
-                None => return tr,
-                Some(usize::MAX) => return [0.0; HERO_N],
-                Some(_) => {
-                    p += d * (left + EPS_KM);
-                    remaining -= t_exit + EPS_KM;
-                }
-            }
-        }
-        tr
+    fn ratio_track(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> [f64; HERO_N] {
+        self.t[0].ratio_track_n(p, d, t_max, self.majorant, |z| self.sigma_t(z), rng)
     }
 
     /// One hero path: the radiance estimate of each of the four bands
@@ -127,57 +86,23 @@ impl<'a> HeroTracer<'a> {
             let mut ground: Option<DVec3> = None;
             if depth == 0 {
                 // Forced first collision against the shared majorant.
-                let ground_t = h.segments(p, d, &mut segs);
-                for sg in segs.iter_mut() {
-                    let s = h.medium.shell_of(h.altitude(p + d * (0.5 * (sg.0 + sg.1)).min(1e12)).max(0.0));
-                    sg.2 = self.majorant[s];
-                }
-                let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
-                if tau_m <= 0.0 {
-                    match ground_t {
-                        None => break,
-                        Some(t) => ground = Some(p + d * t),
-                    }
-                } else {
-                    let p_coll = match ground_t {
-                        None => 1.0,
-                        Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
-                    };
-                    let take_ground = match ground_t {
-                        Some(_) => rng.uniform() >= p_coll,
-                        None => false,
-                    };
-                    if !take_ground {
-                        let one_minus = -libm::expm1(-tau_m);
-                        let tau_star = -libm::log1p(-rng.uniform() * one_minus);
-                        let mut acc = 0.0;
-                        let mut t = 0.0;
-                        let mut m_at = 0.0;
-                        for &(a, b, m) in segs.iter() {
-                            let dt = (b - a) * m;
-                            if m > 0.0 && acc + dt > tau_star {
-                                t = a + (tau_star - acc) / m;
-                                m_at = m;
-                                break;
-                            }
-                            acc += dt;
-                        }
-                        if m_at <= 0.0 {
-                            break;
-                        }
-                        let q = m_at * libm::exp(-tau_star) / one_minus * p_coll;
+                let ground_t = h.segments(p, d, self.majorant, &mut segs);
+                match choose_forced(&segs, ground_t, rng) {
+                    Forced::Clear(None) | Forced::Lost => break,
+                    Forced::Clear(Some(t)) => ground = Some(p + d * t),
+                    Forced::Collision { t, pdf } => {
                         let tr = self.ratio_track(p, d, t, rng);
                         for k in 0..HERO_N {
                             f[k] *= tr[k];
-                            pk[k] *= q;
+                            pk[k] *= pdf;
                         }
                         collision = Some(p + d * t);
-                    } else {
-                        let t = ground_t.unwrap_or(0.0);
+                    }
+                    Forced::Ground { t, prob } => {
                         let tr = self.ratio_track(p, d, t, rng);
                         for k in 0..HERO_N {
                             f[k] *= tr[k];
-                            pk[k] *= 1.0 - p_coll;
+                            pk[k] *= prob;
                         }
                         ground = Some(p + d * t);
                     }
@@ -194,7 +119,7 @@ impl<'a> HeroTracer<'a> {
                         let t = -libm::log(1.0 - rng.uniform()) / m;
                         if t < t_exit {
                             q += d * t;
-                            let (st, _) = self.sigmas(h.altitude(q));
+                            let st = self.sigma_t(h.altitude(q));
                             if rng.uniform() * m < st[0] {
                                 for k in 0..HERO_N {
                                     pk[k] *= st[k] / m;
@@ -254,7 +179,7 @@ impl<'a> HeroTracer<'a> {
                 p = g;
             } else if let Some(c) = collision {
                 let z = h.altitude(c);
-                let (st, ss) = self.sigmas(z);
+                let ss = self.sigma_s(z);
                 if ss[0] <= 0.0 {
                     break;
                 }
@@ -278,7 +203,6 @@ impl<'a> HeroTracer<'a> {
                         res[j] += f[j] * c_j * t / den;
                     }
                 }
-                let _ = st;
                 // Pick the scatterer with the hero's scattering coefficients.
                 let mut pick = rng.uniform() * ss[0];
                 let mut which = k_comp - 1;

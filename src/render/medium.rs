@@ -89,7 +89,7 @@ pub struct Spectral {
 
 impl Medium {
     /// Rasterises the atmosphere's profiles.
-    pub fn new(atm: &Atmosphere, cache: &MieCache) -> Medium {
+    pub fn new(atm: &Atmosphere) -> Medium {
         let top = atm.planet.top_km;
         let n = (top / GRID_STEP_KM).ceil() as usize + 1;
         let zs: Vec<f64> = (0..n).map(|k| (k as f64 * GRID_STEP_KM).min(top)).collect();
@@ -111,7 +111,6 @@ impl Medium {
             names.push(a.name.clone());
             kinds.push(ComponentKind::Aerosol);
             // Aerosol extinction is carried per unit of the (possibly relative) profile.
-            let _ = cache;
             density.push(raster(1.0, a.profile));
         }
         let edges = shell_edges(top);

@@ -172,6 +172,8 @@ impl Bands {
 /// The prepared scene: medium, per-band and per-line optics.
 pub struct Scene {
     pub medium: Medium,
+    /// For hero sampling: the shared majorant of the set whose hero is band b.
+    pub hero_majorant: Vec<Vec<f64>>,
     pub columns: ColumnTable,
     pub bands: Bands,
     pub band_optics: Vec<Spectral>,
@@ -183,7 +185,7 @@ impl Scene {
     /// Computes the optics (Mie tables come from `cache`); `on_step` is
     /// called after each wavelength, for progress.
     pub fn new(atm: &Atmosphere, s: &Settings, cache: &MieCache, on_step: &(dyn Fn() + Sync)) -> Scene {
-        let medium = Medium::new(atm, cache);
+        let medium = Medium::new(atm);
         let columns = ColumnTable::new(&medium);
         let bands = Bands::new(atm, s.band_nm, s.wavelength_sampling);
         let band_optics = if s.xyz {
@@ -206,7 +208,15 @@ impl Scene {
                 o
             })
             .collect();
-        Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
+        let n = band_optics.len();
+        let hero_majorant = if s.wavelength_sampling == WavelengthSampling::Hero {
+            (0..n)
+                .map(|b| hero::shared_majorant(std::array::from_fn(|j| band_optics[(b + j * n / hero::HERO_N) % n].majorant.as_slice())))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Scene { medium, hero_majorant, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
     }
 
     /// How many wavelengths `new` evaluates (for a progress bar).
@@ -337,7 +347,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
                 any = true;
                 let n = scene.bands.len();
                 let set: [usize; hero::HERO_N] = std::array::from_fn(|j| (b + j * n / hero::HERO_N) % n);
-                let ht = hero::HeroTracer::new(std::array::from_fn(|j| &tracers_band[set[j]]));
+                let ht = hero::HeroTracer::new(std::array::from_fn(|j| &tracers_band[set[j]]), &scene.hero_majorant[b]);
                 let sel = std::array::from_fn(|j| scene.bands.pdf[set[j]]);
                 let (ld, ls) = ht.radiance(origin, d, sel, &mut rng);
                 for c in 0..3 {

@@ -203,7 +203,7 @@ impl<'a> Tracer<'a> {
     /// The majorant segments along the ray from `p` to where it leaves the
     /// atmosphere or meets the ground: (start, end, majorant) in km and
     /// km⁻¹, and the distance to the ground if it is met.
-    pub(crate) fn segments(&self, mut p: DVec3, d: DVec3, out: &mut Vec<(f64, f64, f64)>) -> Option<f64> {
+    pub(crate) fn segments(&self, mut p: DVec3, d: DVec3, majorant: &[f64], out: &mut Vec<(f64, f64, f64)>) -> Option<f64> {
         out.clear();
         let mut t = 0.0;
         for _ in 0..1_000_000 {
@@ -211,7 +211,7 @@ impl<'a> Tracer<'a> {
             if !t_exit.is_finite() {
                 return None;
             }
-            out.push((t, t + t_exit, self.spectral.majorant[s]));
+            out.push((t, t + t_exit, majorant[s]));
             t += t_exit;
             p += d * t_exit;
             match next {
@@ -236,53 +236,24 @@ impl<'a> Tracer<'a> {
     /// otherwise, weighted by T(0, t_ground) / (1 − P). Returns the event
     /// and the weight.
     fn fly_forced(&self, p: DVec3, d: DVec3, rng: &mut Rng, segs: &mut Vec<(f64, f64, f64)>) -> (Flight, f64) {
-        let ground = self.segments(p, d, segs);
-        let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
-        if tau_m <= 0.0 {
-            return match ground {
-                None => (Flight::Escape, 1.0),
-                Some(t) => (Flight::Ground(p + d * t), 1.0),
-            };
-        }
-        let p_coll = match ground {
-            None => 1.0,
-            Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
-        };
-        let ground_branch = match ground {
-            Some(t) if rng.uniform() >= p_coll => Some(t),
-            _ => None,
-        };
-        if ground_branch.is_none() {
-            // τ* from the truncated exponential on [0, τ_m).
-            let one_minus = -libm::expm1(-tau_m);
-            let tau_star = -libm::log1p(-rng.uniform() * one_minus);
-            let mut acc = 0.0;
-            let mut t = segs.last().map(|s| s.1).unwrap_or(0.0);
-            let mut m_at = 0.0;
-            for &(a, b, m) in segs.iter() {
-                let dt = (b - a) * m;
-                if m > 0.0 && acc + dt > tau_star {
-                    t = a + (tau_star - acc) / m;
-                    m_at = m;
-                    break;
+        let ground = self.segments(p, d, &self.spectral.majorant, segs);
+        match choose_forced(segs, ground, rng) {
+            Forced::Clear(None) => (Flight::Escape, 1.0),
+            Forced::Clear(Some(t)) => (Flight::Ground(p + d * t), 1.0),
+            Forced::Lost => (Flight::Escape, 0.0),
+            Forced::Collision { t, pdf } => {
+                let q = p + d * t;
+                let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(q));
+                if sigma_t <= 0.0 {
+                    return (Flight::Collision(q), 0.0);
                 }
-                acc += dt;
+                let tr = self.transmittance_to(p, d, t, rng);
+                (Flight::Collision(q), sigma_t * tr / pdf)
             }
-            if m_at <= 0.0 {
-                return (Flight::Escape, 0.0);
+            Forced::Ground { t, prob } => {
+                let tr = self.transmittance_to(p, d, t, rng);
+                (Flight::Ground(p + d * t), tr / prob)
             }
-            let q = p + d * t;
-            let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(q));
-            if sigma_t <= 0.0 {
-                return (Flight::Collision(q), 0.0);
-            }
-            let tr = self.transmittance_to(p, d, t, rng);
-            let pdf = m_at * libm::exp(-tau_star) / one_minus;
-            (Flight::Collision(q), sigma_t * tr / (pdf * p_coll))
-        } else {
-            let t = ground_branch.expect("ground branch");
-            let tr = self.transmittance_to(p, d, t, rng);
-            (Flight::Ground(p + d * t), tr / (1.0 - p_coll))
         }
     }
 
@@ -301,8 +272,23 @@ impl<'a> Tracer<'a> {
     /// Ratio tracking (Novák et al. 2014) over the first `t_max` km of the
     /// ray, or to space when `t_max` is infinite; 0 if the ground comes
     /// first. Russian roulette below 0.1 keeps long, dark paths cheap.
-    fn ratio_track(&self, mut p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
-        let mut tr = 1.0;
+    fn ratio_track(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
+        self.ratio_track_n(p, d, t_max, &self.spectral.majorant, |z| [self.spectral.sigma_t(self.medium, z)], rng)[0]
+    }
+
+    /// Ratio tracking of N extinction coefficients at once against one
+    /// majorant per shell (the hero tracer's four bands share one); Russian
+    /// roulette once the largest transmittance is below 0.1.
+    pub(crate) fn ratio_track_n<const N: usize>(
+        &self,
+        mut p: DVec3,
+        d: DVec3,
+        t_max: f64,
+        majorant: &[f64],
+        sigma_t: impl Fn(f64) -> [f64; N],
+        rng: &mut Rng,
+    ) -> [f64; N] {
+        let mut tr = [1.0; N];
         let mut remaining = t_max;
         for _ in 0..1_000_000 {
             let (s, t_exit, next) = self.shell_exit(p, d);
@@ -311,7 +297,7 @@ impl<'a> Tracer<'a> {
             // shell-by-shell walk.
             let target_first = remaining <= t_exit + 1e-7;
             let span = if target_first { remaining.min(t_exit) } else { t_exit };
-            let m = self.spectral.majorant[s];
+            let m = majorant[s];
             let mut left = span;
             if m > 0.0 {
                 loop {
@@ -321,13 +307,17 @@ impl<'a> Tracer<'a> {
                     }
                     left -= t;
                     p += d * t;
-                    let sigma_t = self.spectral.sigma_t(self.medium, self.altitude(p));
-                    tr *= 1.0 - sigma_t / m;
-                    if tr < 0.1 {
+                    let st = sigma_t(self.altitude(p));
+                    for j in 0..N {
+                        tr[j] *= 1.0 - st[j] / m;
+                    }
+                    if tr.iter().cloned().fold(0.0, f64::max) < 0.1 {
                         if rng.uniform() < 0.5 {
-                            return 0.0;
+                            return [0.0; N];
                         }
-                        tr *= 2.0;
+                        for v in &mut tr {
+                            *v *= 2.0;
+                        }
                     }
                 }
             }
@@ -336,7 +326,7 @@ impl<'a> Tracer<'a> {
             }
             match next {
                 None => return tr,
-                Some(usize::MAX) => return 0.0,
+                Some(usize::MAX) => return [0.0; N],
                 Some(_) => {
                     p += d * (left + EPS_KM);
                     remaining -= t_exit + EPS_KM;
@@ -500,6 +490,52 @@ impl<'a> Tracer<'a> {
         }
         (direct * self.spectral.sun_irradiance, l * self.spectral.sun_irradiance)
     }
+}
+
+/// The decision of a forced flight (see `Tracer::fly_forced`), shared by
+/// the single-band and the hero tracer.
+pub(crate) enum Forced {
+    /// No medium on the ray: it escapes (None) or reaches the ground at t.
+    Clear(Option<f64>),
+    /// The sampled collision fell on an empty segment: the path carries nothing.
+    Lost,
+    /// A collision at t, drawn with density `pdf` (the branch choice included).
+    Collision { t: f64, pdf: f64 },
+    /// The ground at t, chosen with probability `prob`.
+    Ground { t: f64, prob: f64 },
+}
+
+/// Chooses between a forced collision, drawn from the majorant free-path
+/// density truncated to the ray, q(t) = m(t) e^(−τ_m(t)) / (1 − e^(−τ_m)),
+/// and the ground (when the ray meets it), taking the collision branch with
+/// probability P = 1 − e^(−τ_m) clamped to [0.1, 0.9].
+pub(crate) fn choose_forced(segs: &[(f64, f64, f64)], ground: Option<f64>, rng: &mut Rng) -> Forced {
+    let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
+    if tau_m <= 0.0 {
+        return Forced::Clear(ground);
+    }
+    let p_coll = match ground {
+        None => 1.0,
+        Some(_) => (-libm::expm1(-tau_m)).clamp(0.1, 0.9),
+    };
+    if let Some(t) = ground {
+        if rng.uniform() >= p_coll {
+            return Forced::Ground { t, prob: 1.0 - p_coll };
+        }
+    }
+    // τ* from the truncated exponential on [0, τ_m).
+    let one_minus = -libm::expm1(-tau_m);
+    let tau_star = -libm::log1p(-rng.uniform() * one_minus);
+    let mut acc = 0.0;
+    for &(a, b, m) in segs {
+        let dt = (b - a) * m;
+        if m > 0.0 && acc + dt > tau_star {
+            let t = a + (tau_star - acc) / m;
+            return Forced::Collision { t, pdf: m * libm::exp(-tau_star) / one_minus * p_coll };
+        }
+        acc += dt;
+    }
+    Forced::Lost
 }
 
 /// Henyey–Greenstein sampling of μ (Henyey and Greenstein 1941; pbrt-v4's
