@@ -24,7 +24,7 @@ enum CameraKind {
     Fisheye,
     /// Perspective view (--look-azimuth-deg, --look-elevation-deg, --fov-deg)
     Pinhole,
-    /// The LUT's adaptive (u, v) mapping (not implemented yet)
+    /// A LUT slice through the talk's adaptive (u, v) mapping: u across, v down (--size 32x128 like the talk's)
     Lut,
     /// A CSV of zenith_deg,azimuth_deg rows (--directions FILE)
     Directions,
@@ -112,6 +112,9 @@ pub struct RenderArgs {
     /// Hide the sun's disk from camera rays (diffuse sky only)
     #[arg(long)]
     hide_sun_disk: bool,
+    /// With --camera lut: the sun zenith angle beyond which the slice switches to latitude-longitude (default: where the sun-centred mapping's texels break down at this --size; the talk leaves it open)
+    #[arg(long, value_name = "DEG")]
+    lut_threshold_deg: Option<f64>,
     /// The naive estimator (analog tracking, no next-event estimation), for comparisons
     #[arg(long, hide = true)]
     naive: bool,
@@ -171,8 +174,14 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         CameraKind::Fisheye => (Camera::Fisheye, a.size),
         CameraKind::Pinhole => (Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg }, a.size),
         CameraKind::Lut => {
-            eprintln!("sky render: --camera lut needs the LUT mappings of the bake, which are not implemented yet");
-            return Ok(ExitCode::from(super::EXIT_USAGE));
+            let (w, h) = a.size;
+            let threshold_deg = match a.lut_threshold_deg {
+                Some(t) if (0.0..=90.0).contains(&t) => t,
+                Some(t) => return usage(format!("--lut-threshold-deg must be between 0 and 90, got {t}")),
+                None => sky::lut::mapping::default_threshold_deg(w, h),
+            };
+            let mapping = sky::lut::mapping::DirectionMapping::new(a.sun_zenith_deg, threshold_deg);
+            (Camera::Lut { mapping, sun_azimuth_deg: a.sun_azimuth_deg }, a.size)
         }
         CameraKind::Directions => {
             let Some(f) = &a.directions else { return usage("--camera directions needs --directions FILE.csv") };
@@ -242,8 +251,20 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let render_s = t0.elapsed().as_secs_f64();
     let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
     let samples = taken * (1 + settings.spectral_nm.len()) as f64;
+    let camera_desc = match &settings.camera {
+        Camera::Equirect => "equirect".to_string(),
+        Camera::Fisheye => "fisheye".to_string(),
+        Camera::Pinhole { azimuth_deg, elevation_deg, fov_deg } => format!("pinhole azimuth {azimuth_deg} deg, elevation {elevation_deg} deg, fov {fov_deg} deg"),
+        Camera::Directions(_) => "directions".to_string(),
+        Camera::Lut { mapping, .. } => format!(
+            "lut ({} mapping, threshold sun zenith {:.1} deg; u = heading/azimuth from the sun over pi, v as in the talk's uvToWorldSpaceDirection)",
+            if mapping.sun_centred() { "sun-centred" } else { "latitude-longitude" },
+            mapping.threshold_deg
+        ),
+    };
     let metadata = vec![
         ("version".to_string(), sky::VERSION.to_string()),
+        ("camera".to_string(), camera_desc),
         ("atmosphere".to_string(), atm.path.display().to_string()),
         ("atmosphere_hash".to_string(), atm.content_hash.clone()),
         ("sun_zenith_deg".to_string(), a.sun_zenith_deg.to_string()),

@@ -23,6 +23,10 @@ pub enum Camera {
     Pinhole { azimuth_deg: f64, elevation_deg: f64, fov_deg: f64 },
     /// One "pixel" per (zenith, azimuth) pair in degrees, for validation.
     Directions(Vec<(f64, f64)>),
+    /// A LUT slice: texel (u, v) through the talk's adaptive mapping
+    /// ([`crate::lut::mapping`]), turned to the sun's azimuth. Texel centres
+    /// are sampled without jitter, as a GPU's bilinear filter expects.
+    Lut { mapping: crate::lut::mapping::DirectionMapping, sun_azimuth_deg: f64 },
 }
 
 impl Camera {
@@ -60,12 +64,17 @@ impl Camera {
                 let i = y as usize * width + x as usize;
                 list.get(i).map(|&(z, a)| direction_deg(z, a))
             }
+            Camera::Lut { mapping, sun_azimuth_deg } => {
+                let d = mapping.direction(x / w, y / h);
+                let (s, c) = (libm::sin(sun_azimuth_deg.to_radians()), libm::cos(sun_azimuth_deg.to_radians()));
+                Some(DVec3::new(c * d.x - s * d.y, s * d.x + c * d.y, d.z))
+            }
         }
     }
 
     /// Whether pixel positions are jittered within the pixel.
     pub fn jitters(&self) -> bool {
-        !matches!(self, Camera::Directions(_))
+        !matches!(self, Camera::Directions(_) | Camera::Lut { .. })
     }
 }
 
@@ -85,5 +94,14 @@ mod tests {
         let p = Camera::Pinhole { azimuth_deg: 90.0, elevation_deg: 10.0, fov_deg: 60.0 };
         let d = p.direction(50.0, 50.0, 100, 100).unwrap();
         assert!((d - direction_deg(80.0, 90.0)).length() < 1e-9);
+    }
+
+    #[test]
+    fn lut_camera_turns_with_the_sun() {
+        let mapping = crate::lut::mapping::DirectionMapping::new(60.0, 87.5);
+        let cam = Camera::Lut { mapping, sun_azimuth_deg: 135.0 };
+        // v = 0 is the sun itself, wherever it stands.
+        let d = cam.direction(3.0, 0.0, 32, 128).unwrap();
+        assert!((d - direction_deg(60.0, 135.0)).length() < 1e-9, "{d}");
     }
 }

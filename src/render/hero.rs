@@ -12,6 +12,7 @@
 //! phase sampling differ between bands (the null-scattering path integral of
 //! Miller, Georgiev and Jarosz 2019 gives these densities).
 
+use super::guide::RayGuide;
 use super::rng::Rng;
 use super::tracer::{choose_forced, Forced, Tracer, EPS_KM};
 use glam::DVec3;
@@ -54,16 +55,36 @@ impl<'a> HeroTracer<'a> {
         sp.extinction[i] * self.t[0].medium.density(i, z) * sp.albedo[i]
     }
 
-    /// Ratio tracking of all four bands at once over `t_max` (or to space).
-    fn ratio_track(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> [f64; HERO_N] {
-        self.t[0].ratio_track_n(p, d, t_max, self.majorant, |z| self.sigma_t(z), rng)
+    /// The density of a scattered direction had band `k` been the hero:
+    /// the local strategy's density `local` mixed with band k's sun lobe
+    /// at cos ν to the sun (see `Tracer::sun_lobe`).
+    #[inline]
+    fn mixture_pdf(&self, k: usize, local: f64, nu: f64) -> f64 {
+        let t = self.t[k];
+        match t.lobe {
+            None => local,
+            Some((i, alpha)) => (1.0 - alpha) * local + alpha * t.spectral.phase[i].eval(nu),
+        }
+    }
+
+    /// The four bands' transmittances over the first `t_max` km of the ray:
+    /// exact from the column table when there is one, else by ratio
+    /// tracking of all four at once.
+    fn transmittance_to(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> [f64; HERO_N] {
+        let h = self.t[0];
+        if let Some(c) = h.columns {
+            if let Some(path) = h.column_path(c, p, d, Some(t_max)) {
+                return std::array::from_fn(|k| libm::exp(-c.path_optical_depth(&path, &self.t[k].spectral.extinction)));
+            }
+        }
+        h.ratio_track_n(p, d, t_max, self.majorant, |z| self.sigma_t(z), rng)
     }
 
     /// One hero path: the radiance estimate of each of the four bands
     /// (relative to each band's solar irradiance, already MIS-weighted and
     /// divided by the hero-selection densities `sel_pdf`), split into the
     /// directly seen sun and the rest.
-    pub fn radiance(&self, origin: DVec3, dir: DVec3, sel_pdf: [f64; HERO_N], rng: &mut Rng) -> ([f64; HERO_N], [f64; HERO_N]) {
+    pub fn radiance(&self, origin: DVec3, dir: DVec3, sel_pdf: [f64; HERO_N], guide: Option<&RayGuide>, rng: &mut Rng) -> ([f64; HERO_N], [f64; HERO_N]) {
         let h = self.t[0];
         let mut direct = [0.0; HERO_N];
         let mut res = [0.0; HERO_N];
@@ -87,11 +108,11 @@ impl<'a> HeroTracer<'a> {
             if depth == 0 {
                 // Forced first collision against the shared majorant.
                 let ground_t = h.segments(p, d, self.majorant, &mut segs);
-                match choose_forced(&segs, ground_t, rng) {
+                match choose_forced(&segs, ground_t, guide, rng) {
                     Forced::Clear(None) | Forced::Lost => break,
                     Forced::Clear(Some(t)) => ground = Some(p + d * t),
                     Forced::Collision { t, pdf } => {
-                        let tr = self.ratio_track(p, d, t, rng);
+                        let tr = self.transmittance_to(p, d, t, rng);
                         for k in 0..HERO_N {
                             f[k] *= tr[k];
                             pk[k] *= pdf;
@@ -99,7 +120,7 @@ impl<'a> HeroTracer<'a> {
                         collision = Some(p + d * t);
                     }
                     Forced::Ground { t, prob } => {
-                        let tr = self.ratio_track(p, d, t, rng);
+                        let tr = self.transmittance_to(p, d, t, rng);
                         for k in 0..HERO_N {
                             f[k] *= tr[k];
                             pk[k] *= prob;
@@ -173,9 +194,23 @@ impl<'a> HeroTracer<'a> {
                 if f.iter().all(|v| *v <= 0.0) {
                     break;
                 }
-                let u1 = rng.uniform();
-                let phi = 2.0 * PI * rng.uniform();
-                d = super::tracer::around(n, u1.sqrt(), phi);
+                // Cosine-weighted, mixed with the sun lobe (Tracer::sun_lobe).
+                let (nd, _) = h.guided(rng, |r| {
+                    let u1 = r.uniform();
+                    let phi = 2.0 * PI * r.uniform();
+                    super::tracer::around(n, u1.sqrt(), phi)
+                });
+                let cos_o = n.dot(nd);
+                if cos_o <= 0.0 {
+                    break;
+                }
+                let nu = nd.dot(h.sun_dir);
+                for k in 0..HERO_N {
+                    let local = cos_o / PI;
+                    f[k] *= local;
+                    pk[k] *= self.mixture_pdf(k, local, nu);
+                }
+                d = nd;
                 p = g;
             } else if let Some(c) = collision {
                 let z = h.altitude(c);
@@ -214,13 +249,21 @@ impl<'a> HeroTracer<'a> {
                     }
                     pick -= s;
                 }
-                let nd = h.sample_phase(&h.spectral.phase[which], d, rng);
+                let (nd, _) = h.guided(rng, |r| h.sample_phase(&h.spectral.phase[which], d, r));
                 let mu = d.dot(nd);
+                let nu = nd.dot(h.sun_dir);
                 for k in 0..HERO_N {
-                    let s = self.sigma_s_i(k, which, z);
-                    let pf = self.t[k].spectral.phase[which].eval(mu);
-                    f[k] *= s * pf;
-                    pk[k] *= if ss[k] > 0.0 { s / ss[k] * pf } else { 0.0 };
+                    // The scatterer choice marginalised: Σ_i σ_s,i p_i(μ).
+                    let mut sp = 0.0;
+                    for i in 0..k_comp {
+                        let s = self.sigma_s_i(k, i, z);
+                        if s > 0.0 {
+                            sp += s * self.t[k].spectral.phase[i].eval(mu);
+                        }
+                    }
+                    f[k] *= sp;
+                    let local = if ss[k] > 0.0 { sp / ss[k] } else { 0.0 };
+                    pk[k] *= self.mixture_pdf(k, local, nu);
                 }
                 d = nd;
                 p = c;

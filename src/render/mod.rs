@@ -15,6 +15,7 @@
 
 pub mod camera;
 pub mod denoise;
+pub mod guide;
 pub mod hero;
 pub mod medium;
 pub mod output;
@@ -312,6 +313,16 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
         Some(t) => t.observer(s.altitude_m / 1000.0),
         None => return empty,
     };
+    // The first-collision guide, from the pixel's central ray at the band
+    // that weighs most in luminance (see guide.rs).
+    let guide = match (centre, s.estimator) {
+        (Some(c), tracer::Estimator::Full) => {
+            let reference = tracers_band.iter().zip(&scene.bands.weight).max_by(|a, b| a.1[1].total_cmp(&b.1[1])).map(|(t, _)| t).or(tracers_line.first());
+            reference.and_then(|t| guide::RayGuide::build(t, origin, c))
+        }
+        _ => None,
+    };
+    let guide = guide.as_ref();
     let mut any = false;
     // Band choice and pixel jitter follow low-discrepancy sequences over the
     // sample index (Roberts' R1 and R2 sequences), randomly shifted per pixel
@@ -349,7 +360,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
                 let set: [usize; hero::HERO_N] = std::array::from_fn(|j| (b + j * n / hero::HERO_N) % n);
                 let ht = hero::HeroTracer::new(std::array::from_fn(|j| &tracers_band[set[j]]), &scene.hero_majorant[b]);
                 let sel = std::array::from_fn(|j| scene.bands.pdf[set[j]]);
-                let (ld, ls) = ht.radiance(origin, d, sel, &mut rng);
+                let (ld, ls) = ht.radiance(origin, d, sel, guide, &mut rng);
                 for c in 0..3 {
                     let mut v = 0.0;
                     for j in 0..hero::HERO_N {
@@ -363,7 +374,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
             match dir {
                 Some(d) => {
                     any = true;
-                    let (ld, ls) = tracers_band[b].radiance_parts(origin, d, &mut rng);
+                    let (ld, ls) = tracers_band[b].radiance_parts(origin, d, guide, &mut rng);
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
                     for c in 0..3 {
@@ -385,7 +396,8 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
                     any = true;
-                    lines[j].add(t.radiance(origin, d, &mut rng));
+                    let (ld, ls) = t.radiance_parts(origin, d, guide, &mut rng);
+                    lines[j].add(ld + ls);
                 }
                 None => lines[j].add(0.0),
             }

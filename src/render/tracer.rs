@@ -10,7 +10,8 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
-use super::medium::{ColumnTable, Medium, Phase, Spectral};
+use super::guide::RayGuide;
+use super::medium::{ColumnPath, ColumnTable, Medium, Phase, Spectral};
 use super::rng::Rng;
 use crate::atmosphere::Geometry;
 use glam::DVec3;
@@ -57,7 +58,22 @@ pub struct Tracer<'a> {
     /// Tabulated columns for transmittance toward space along rays that
     /// do not descend (None: ratio tracking everywhere).
     pub columns: Option<&'a ColumnTable>,
+    /// Sun-lobe guiding: the component whose phase function is most
+    /// forward-peaked, and the probability of drawing a scattered direction
+    /// from its lobe around the sun instead of from the local phase function
+    /// (see [`Tracer::sun_lobe`]).
+    pub lobe: Option<(usize, f64)>,
 }
+
+/// Probability of drawing a scattered direction from the sun lobe, when the
+/// medium has a forward-peaked component. Measured on the hazed sky (sun at
+/// 80°, view 90° from it, 8192 paths at 550 nm): per-sample relative
+/// deviation 2.41 without the lobe, 2.03 at α = 0.1, 2.18 at 0.25, 2.78 at
+/// 0.5; the test `variance_reductions_are_unbiased` checks it still helps.
+pub const LOBE_PROBABILITY: f64 = 0.25;
+/// A component guides toward the sun only if its phase function peaks
+/// above this, sr⁻¹ (Rayleigh peaks at 0.12; HG with g = 0.5 at 0.72).
+const LOBE_MIN_PEAK_SR_INV: f64 = 1.0;
 
 #[inline]
 fn ln(x: f64) -> f64 {
@@ -69,7 +85,63 @@ impl<'a> Tracer<'a> {
         let half = 0.5 * sun_angular_diameter_deg.to_radians();
         let cos_half = libm::cos(half);
         let omega = 2.0 * PI * (1.0 - cos_half);
-        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None }
+        let lobe = match estimator {
+            Estimator::Naive => None,
+            Estimator::Full => Tracer::sun_lobe(spectral).map(|i| (i, LOBE_PROBABILITY)),
+        };
+        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None, lobe }
+    }
+
+    /// The component whose phase function has the highest forward peak, if
+    /// that peak is strong enough to be worth guiding toward.
+    ///
+    /// Why: the sun is a parallel light for scattering, so next-event
+    /// estimation is the only way sunlight enters a path, and its value at
+    /// a vertex is p(ω·ω_sun). When the direction ω arriving at that vertex
+    /// was drawn from the previous vertex's phase function (or the ground's
+    /// cosine lobe), nothing steers it toward the sun, and the rare ω that
+    /// fall inside an aerosol's forward peak carry weights of p(1) ~ 10³
+    /// sr⁻¹: fireflies in every multiply scattered pixel. Drawing ω with
+    /// probability α from that peak centred on the sun, p_lobe(ω·ω_sun), and
+    /// weighting by the one-sample balance heuristic over the two
+    /// strategies, f(ω) / ((1 − α) p_local(ω) + α p_lobe(ω)), bounds those
+    /// weights by 1/α times the next phase value's ratio to the lobe
+    /// (Veach 1997, ch. 9: multiple importance sampling; the sun lobe is
+    /// the "where forward-peaked aerosols see the sun" case of the issue).
+    pub fn sun_lobe(spectral: &Spectral) -> Option<usize> {
+        let mut best: Option<(usize, f64)> = None;
+        for (i, ph) in spectral.phase.iter().enumerate() {
+            if spectral.albedo[i] <= 0.0 || spectral.extinction[i] <= 0.0 {
+                continue;
+            }
+            let peak = ph.eval(1.0);
+            if peak > LOBE_MIN_PEAK_SR_INV && best.is_none_or(|(_, b)| peak > b) {
+                best = Some((i, peak));
+            }
+        }
+        best.map(|(i, _)| i)
+    }
+
+    /// Draws a scattered direction at a vertex whose local sampling is
+    /// `local` (returning the direction), mixed with the sun lobe; returns
+    /// the direction and the density of the lobe strategy there (0 when
+    /// there is no lobe). The caller divides by (1 − α) p_local + α p_lobe.
+    #[inline]
+    pub(crate) fn guided(&self, rng: &mut Rng, local: impl FnOnce(&mut Rng) -> DVec3) -> (DVec3, f64) {
+        match self.lobe {
+            None => (local(rng), 0.0),
+            Some((i, alpha)) => {
+                let phase = &self.spectral.phase[i];
+                let d = if rng.uniform() < alpha { self.sample_phase(phase, self.sun_dir, rng) } else { local(rng) };
+                (d, phase.eval(d.dot(self.sun_dir)))
+            }
+        }
+    }
+
+    /// α, the probability of the lobe strategy (0 without one).
+    #[inline]
+    pub(crate) fn lobe_alpha(&self) -> f64 {
+        self.lobe.map_or(0.0, |(_, a)| a)
     }
 
     pub fn with_columns(mut self, columns: &'a ColumnTable) -> Self {
@@ -78,16 +150,66 @@ impl<'a> Tracer<'a> {
     }
 
     /// Transmittance from `p` to space along `d`: from the column table when
-    /// the ray does not descend, else by ratio tracking.
+    /// there is one (exact optical depth, see [`ColumnPath`]), else by
+    /// ratio tracking.
     pub fn transmittance_to_space(&self, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
         if let Some(c) = self.columns {
-            let mu = self.up(p).dot(d);
-            if mu >= 0.0 {
-                let tau = c.optical_depth(self.altitude(p), mu, &self.spectral.extinction);
-                return libm::exp(-tau);
-            }
+            return match self.column_path(c, p, d, None) {
+                None => 0.0,
+                Some(path) => libm::exp(-c.path_optical_depth(&path, &self.spectral.extinction)),
+            };
         }
         self.transmittance(p, d, rng)
+    }
+
+    /// The columns whose sum and difference give the optical depth from `p`
+    /// along `d` over `t_km` (to space when None); None when a ray to space
+    /// meets the ground. The segment must not cross the ground.
+    pub(crate) fn column_path(&self, c: &ColumnTable, p: DVec3, d: DVec3, t_km: Option<f64>) -> Option<ColumnPath> {
+        let mut path = ColumnPath::default();
+        let mu_p = self.up(p).dot(d);
+        let z_p = self.altitude(p);
+        let end = t_km.map(|t| {
+            let q = p + d * t;
+            (self.altitude(q), self.up(q).dot(d))
+        });
+        if mu_p >= 0.0 {
+            // Rising all along.
+            path.push_add(c.node(z_p, mu_p));
+            if let Some((z_q, mu_q)) = end {
+                path.push_sub(c.node(z_q, mu_q));
+            }
+            return Some(path);
+        }
+        // Sinking at p: where is the lowest point of the line?
+        let (t_low, z_low) = match self.medium.geometry {
+            Geometry::PlaneParallel => (f64::INFINITY, f64::NEG_INFINITY),
+            Geometry::Spherical => {
+                let t_low = -p.dot(d);
+                (t_low, (p + d * t_low).length() - self.medium.radius_km)
+            }
+        };
+        match end {
+            Some((z_q, mu_q)) if t_km.unwrap() <= t_low || mu_q <= 0.0 => {
+                // Sinking all along: the reverse, q→p, rises.
+                path.push_add(c.node(z_q, -mu_q));
+                path.push_sub(c.node(z_p, -mu_p));
+                Some(path)
+            }
+            _ => {
+                if z_low < 0.0 {
+                    return None; // the ray meets the ground (only asked for rays to space)
+                }
+                let low = c.node(z_low, 0.0);
+                path.push_add(low);
+                path.push_add(low);
+                path.push_sub(c.node(z_p, -mu_p));
+                if let Some((z_q, mu_q)) = end {
+                    path.push_sub(c.node(z_q, mu_q));
+                }
+                Some(path)
+            }
+        }
     }
 
     pub fn with_sun_disk(mut self, visible: bool) -> Self {
@@ -235,9 +357,9 @@ impl<'a> Tracer<'a> {
     /// probability P = 1 − e^(−τ_m) (at least 0.1) and the ground branch
     /// otherwise, weighted by T(0, t_ground) / (1 − P). Returns the event
     /// and the weight.
-    fn fly_forced(&self, p: DVec3, d: DVec3, rng: &mut Rng, segs: &mut Vec<(f64, f64, f64)>) -> (Flight, f64) {
+    fn fly_forced(&self, p: DVec3, d: DVec3, guide: Option<&RayGuide>, rng: &mut Rng, segs: &mut Vec<(f64, f64, f64)>) -> (Flight, f64) {
         let ground = self.segments(p, d, &self.spectral.majorant, segs);
-        match choose_forced(segs, ground, rng) {
+        match choose_forced(segs, ground, guide, rng) {
             Forced::Clear(None) => (Flight::Escape, 1.0),
             Forced::Clear(Some(t)) => (Flight::Ground(p + d * t), 1.0),
             Forced::Lost => (Flight::Escape, 0.0),
@@ -257,9 +379,17 @@ impl<'a> Tracer<'a> {
         }
     }
 
-    /// Transmittance over the first `t_max` km of the ray, by ratio tracking
-    /// (with Russian roulette below 0.1).
+    /// Transmittance over the first `t_max` km of the ray: exact from the
+    /// column table when there is one, else by ratio tracking (with Russian
+    /// roulette below 0.1). Ratio tracking against a tight majorant is
+    /// nearly a coin flip, 1 or ≈ 0, which made the forced-collision weight
+    /// the largest source of noise in hazy skies.
     fn transmittance_to(&self, p: DVec3, d: DVec3, t_max: f64, rng: &mut Rng) -> f64 {
+        if let Some(c) = self.columns {
+            if let Some(path) = self.column_path(c, p, d, Some(t_max)) {
+                return libm::exp(-c.path_optical_depth(&path, &self.spectral.extinction));
+            }
+        }
         self.ratio_track(p, d, t_max, rng)
     }
 
@@ -367,13 +497,15 @@ impl<'a> Tracer<'a> {
     /// One path sample of the radiance arriving at `origin` from direction
     /// `-dir` (looking along `dir`), relative to the sun's irradiance.
     pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> f64 {
-        let (direct, scattered) = self.radiance_parts(origin, dir, rng);
+        let (direct, scattered) = self.radiance_parts(origin, dir, None, rng);
         direct + scattered
     }
 
     /// [`radiance`](Self::radiance) split into the sun's disk seen directly
     /// (attenuated) and everything scattered or reflected.
-    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> (f64, f64) {
+    /// `guide`, if any, shapes the distance of the forced first collision
+    /// (see [`RayGuide`]).
+    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, guide: Option<&RayGuide>, rng: &mut Rng) -> (f64, f64) {
         let mut direct = 0.0;
         let mut l = 0.0;
         let naive = self.estimator == Estimator::Naive;
@@ -391,7 +523,7 @@ impl<'a> Tracer<'a> {
             let flight = if naive || depth > 0 {
                 self.fly(p, d, rng)
             } else {
-                let (f, w) = self.fly_forced(p, d, rng, &mut segs);
+                let (f, w) = self.fly_forced(p, d, guide, rng, &mut segs);
                 beta *= w;
                 if beta <= 0.0 {
                     break;
@@ -419,7 +551,17 @@ impl<'a> Tracer<'a> {
                         }
                     }
                     beta *= a;
-                    d = cosine_hemisphere(n, rng);
+                    let (nd, p_lobe) = self.guided(rng, |r| cosine_hemisphere(n, r));
+                    let cos_o = n.dot(nd);
+                    if cos_o <= 0.0 {
+                        break;
+                    }
+                    if self.lobe.is_some() {
+                        let alpha = self.lobe_alpha();
+                        let p_local = cos_o / PI;
+                        beta *= p_local / ((1.0 - alpha) * p_local + alpha * p_lobe);
+                    }
+                    d = nd;
                     p = q;
                 }
                 Flight::Collision(q) => {
@@ -475,7 +617,23 @@ impl<'a> Tracer<'a> {
                             l += beta * p_mix / sigma_s * t;
                         }
                     }
-                    d = self.sample_phase(phase, d, rng);
+                    let (nd, p_lobe) = self.guided(rng, |r| self.sample_phase(phase, d, r));
+                    if self.lobe.is_some() {
+                        // The local strategy's density is the mixture phase
+                        // (the scatterer choice marginalised out).
+                        let alpha = self.lobe_alpha();
+                        let mu = d.dot(nd);
+                        let mut p_mix = 0.0;
+                        for i in 0..k {
+                            let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
+                            if s > 0.0 {
+                                p_mix += s * sp.phase[i].eval(mu);
+                            }
+                        }
+                        p_mix /= sigma_s;
+                        beta *= p_mix / ((1.0 - alpha) * p_mix + alpha * p_lobe);
+                    }
+                    d = nd;
                     p = q;
                 }
             }
@@ -509,7 +667,7 @@ pub(crate) enum Forced {
 /// density truncated to the ray, q(t) = m(t) e^(−τ_m(t)) / (1 − e^(−τ_m)),
 /// and the ground (when the ray meets it), taking the collision branch with
 /// probability P = 1 − e^(−τ_m) clamped to [0.1, 0.9].
-pub(crate) fn choose_forced(segs: &[(f64, f64, f64)], ground: Option<f64>, rng: &mut Rng) -> Forced {
+pub(crate) fn choose_forced(segs: &[(f64, f64, f64)], ground: Option<f64>, guide: Option<&RayGuide>, rng: &mut Rng) -> Forced {
     let tau_m: f64 = segs.iter().map(|(a, b, m)| (b - a) * m).sum();
     if tau_m <= 0.0 {
         return Forced::Clear(ground);
@@ -523,19 +681,60 @@ pub(crate) fn choose_forced(segs: &[(f64, f64, f64)], ground: Option<f64>, rng: 
             return Forced::Ground { t, prob: 1.0 - p_coll };
         }
     }
-    // τ* from the truncated exponential on [0, τ_m).
     let one_minus = -libm::expm1(-tau_m);
+    // The majorant's density q(t) = m(t) e^(−τ_m(t)) / (1 − e^(−τ_m)) at t.
+    let majorant_pdf = |t: f64| -> f64 {
+        let mut acc = 0.0;
+        for &(a, b, m) in segs {
+            if t < a {
+                return 0.0; // in a gap between shells
+            }
+            if t < b {
+                return m * libm::exp(-(acc + (t - a) * m)) / one_minus;
+            }
+            acc += (b - a) * m;
+        }
+        0.0
+    };
+    if let Some(g) = guide {
+        let alpha = super::guide::GUIDE_PROBABILITY;
+        let t = if rng.uniform() < alpha {
+            g.sample(rng.uniform())
+        } else {
+            match sample_majorant(segs, one_minus, rng) {
+                Some(t) => t,
+                None => return Forced::Lost,
+            }
+        };
+        let end = segs.last().map_or(0.0, |s| s.1);
+        if t >= end || ground.is_some_and(|tg| t >= tg) {
+            return Forced::Lost;
+        }
+        let pdf = (1.0 - alpha) * majorant_pdf(t) + alpha * g.pdf(t);
+        if !(pdf > 0.0) {
+            return Forced::Lost;
+        }
+        return Forced::Collision { t, pdf: pdf * p_coll };
+    }
+    match sample_majorant(segs, one_minus, rng) {
+        Some(t) => Forced::Collision { t, pdf: majorant_pdf(t) * p_coll },
+        None => Forced::Lost,
+    }
+}
+
+/// A distance from the majorant's free-path density truncated to the ray:
+/// τ* from the truncated exponential on [0, τ_m), then located in its shell.
+fn sample_majorant(segs: &[(f64, f64, f64)], one_minus: f64, rng: &mut Rng) -> Option<f64> {
     let tau_star = -libm::log1p(-rng.uniform() * one_minus);
     let mut acc = 0.0;
     for &(a, b, m) in segs {
         let dt = (b - a) * m;
         if m > 0.0 && acc + dt > tau_star {
-            let t = a + (tau_star - acc) / m;
-            return Forced::Collision { t, pdf: m * libm::exp(-tau_star) / one_minus * p_coll };
+            return Some(a + (tau_star - acc) / m);
         }
         acc += dt;
     }
-    Forced::Lost
+    None
 }
 
 /// Henyey–Greenstein sampling of μ (Henyey and Greenstein 1941; pbrt-v4's

@@ -1,0 +1,4 @@
+//! Look-up tables for real-time engines: the talk's adaptive mappings
+//! (time slices and sky directions).
+
+pub mod mapping;
