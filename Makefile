@@ -57,6 +57,8 @@ sunsets: build
 	      --out $(OUT)/sunset_$${atm}_$${elev}.exr --png docs/images/sunset_$${atm}_$${elev}.png; \
 	  done; \
 	done
+	python3 scripts/contact_sheet.py docs/images/sunsets.png 2 \
+	  $(foreach e,10 2 0 -4,docs/images/sunset_clear_$(e).png docs/images/sunset_hazed_$(e).png)
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build
