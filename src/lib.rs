@@ -6,12 +6,14 @@
 //!   its optical properties;
 //! - [`mie`]: Mie theory (BHMIE), log-normal size distributions, phase tables;
 //! - [`render`]: the spectral path tracer behind `sky render`;
+//! - [`farm`]: the render farm (`sky worker` and the distributed `sky render`);
 //! - [`lut`]: the talk's adaptive LUT mappings;
 //! - [`spectrum`]: colour matching functions and the solar spectrum;
 //! - [`table`]: the tabulated data files of `atmospheres/data/`;
 //! - [`plot`]: PNG plots for people.
 
 pub mod atmosphere;
+pub mod farm;
 pub mod lut;
 pub mod mie;
 pub mod plot;

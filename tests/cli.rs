@@ -31,7 +31,7 @@ fn help_lists_every_command() {
 fn unbuilt_commands_say_so_and_exit_2() {
     let c = tempfile::tempdir().unwrap();
     let out_file = c.path().join("sky.exr");
-    for cmd in ["worker", "bake-luts", "preview"] {
+    for cmd in ["bake-luts", "preview"] {
         let o = sky(&[cmd, "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
         assert_eq!(o.status.code(), Some(2), "{cmd}");
         assert!(text(&o).1.contains("not implemented yet"), "{cmd}: {}", text(&o).1);

@@ -5,7 +5,7 @@ use super::*;
 use crate::mie::parse_refractive_index;
 use crate::table::Table;
 use serde::Deserialize;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use toml::Spanned;
 
 type S<T> = Spanned<T>;
@@ -117,6 +117,10 @@ struct Ctx<'a> {
     dir: PathBuf,
     errors: Vec<Located>,
     hasher: blake3::Hasher,
+    /// Where data files come from: the disk (None) or a job's files.
+    files: Option<&'a BTreeMap<String, Vec<u8>>>,
+    /// Every data file read, by the name the atmosphere gives it.
+    read: BTreeMap<String, Vec<u8>>,
 }
 
 impl Ctx<'_> {
@@ -137,8 +141,13 @@ impl Ctx<'_> {
     /// Reads a data table named relative to the atmosphere file.
     fn table<T>(&mut self, at: &S<T>, rel: &str, what: &str) -> Option<Table> {
         let full = self.dir.join(rel);
-        match std::fs::read(&full) {
+        let bytes = match self.files {
+            None => std::fs::read(&full),
+            Some(files) => files.get(rel).cloned().ok_or_else(|| std::io::Error::new(std::io::ErrorKind::NotFound, "not among the job's files")),
+        };
+        match bytes {
             Ok(bytes) => {
+                self.read.insert(rel.to_string(), bytes.clone());
                 self.hasher.update(rel.as_bytes());
                 self.hasher.update(&(bytes.len() as u64).to_le_bytes());
                 self.hasher.update(&bytes);
@@ -196,7 +205,9 @@ fn positive(ctx: &mut Ctx, v: &Option<S<f64>>, key: &str, default: f64) -> f64 {
     }
 }
 
-pub(super) fn parse(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
+/// Parses an atmosphere; data files come from the disk (relative to `path`)
+/// or, with `files`, from a job. Returns the data files read, by name.
+pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec<u8>>>) -> Result<(Atmosphere, BTreeMap<String, Vec<u8>>), LoadError> {
     let raw: RawFile = match toml::from_str(text) {
         Ok(r) => r,
         Err(e) => {
@@ -211,6 +222,8 @@ pub(super) fn parse(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
         dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
         errors: Vec::new(),
         hasher: blake3::Hasher::new(),
+        files,
+        read: BTreeMap::new(),
     };
     ctx.hasher.update(text.as_bytes());
 
@@ -611,7 +624,7 @@ pub(super) fn parse(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
         .name
         .map(|n| n.into_inner())
         .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
-    Ok(Atmosphere {
+    let atm = Atmosphere {
         name,
         description: raw.description.map(|d| d.into_inner()).unwrap_or_default(),
         path: path.to_path_buf(),
@@ -623,7 +636,8 @@ pub(super) fn parse(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
         aerosols,
         ground_albedo,
         sun: sun.expect("no errors means a sun"),
-    })
+    };
+    Ok((atm, ctx.read))
 }
 
 fn analytic_optics(ctx: &mut Ctx, a: &RawAerosol, at: &S<RawAerosol>, label: &str) -> Option<AerosolOptics> {

@@ -162,6 +162,15 @@ pub struct Atmosphere {
     pub sun: Sun,
 }
 
+/// An atmosphere file's text with the data files it reads, keyed by the
+/// names it gives them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Bundle {
+    pub name: String,
+    pub text: String,
+    pub files: std::collections::BTreeMap<String, Vec<u8>>,
+}
+
 impl Atmosphere {
     /// Loads and validates an atmosphere file.
     pub fn load(path: &Path) -> Result<Atmosphere, LoadError> {
@@ -174,7 +183,25 @@ impl Atmosphere {
     /// Parses atmosphere text; `path` names it in errors and anchors its
     /// relative data paths.
     pub fn from_str(path: &Path, text: &str) -> Result<Atmosphere, LoadError> {
-        config::parse(path, text)
+        config::parse(path, text, None).map(|(a, _)| a)
+    }
+
+    /// Loads an atmosphere file with every data file it reads, so that it
+    /// can travel in a farm job (see [`Atmosphere::from_bundle`]).
+    pub fn load_bundle(path: &Path) -> Result<(Atmosphere, Bundle), LoadError> {
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError {
+            errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }],
+        })?;
+        let (atm, files) = config::parse(path, &text, None)?;
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        Ok((atm, Bundle { name, text, files }))
+    }
+
+    /// Parses a bundled atmosphere: data files come from the bundle only,
+    /// never from the disk. Errors name the file as `job:NAME`.
+    pub fn from_bundle(bundle: &Bundle) -> Result<Atmosphere, LoadError> {
+        let path = PathBuf::from(format!("job:{}", bundle.name));
+        config::parse(&path, &bundle.text, Some(&bundle.files)).map(|(a, _)| a)
     }
 
     pub fn profile(&self, i: usize) -> &Profile {

@@ -4,6 +4,7 @@ mod atmosphere;
 mod bench;
 mod mie;
 mod render;
+mod worker;
 
 use clap::{Parser, Subcommand};
 use std::process::ExitCode;
@@ -32,8 +33,8 @@ pub struct Cli {
 enum Command {
     /// Path-trace a full-spectrum sky to an XYZ OpenEXR
     Render(render::RenderArgs),
-    /// Run a render-farm worker daemon (not implemented yet)
-    Worker(NotYet),
+    /// Run a render-farm worker daemon on an idle PC
+    Worker(worker::WorkerArgs),
     /// Bake the basis-sky, fog, transmittance and ambient LUTs (not implemented yet)
     BakeLuts(NotYet),
     /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
@@ -77,7 +78,7 @@ pub fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(a) => render::run(a),
-        Command::Worker(_) => not_yet("worker", Some(4)),
+        Command::Worker(a) => worker::run(a),
         Command::BakeLuts(_) => not_yet("bake-luts", None),
         Command::Preview(_) => not_yet("preview", None),
         Command::Atmosphere(c) => atmosphere::run(c),

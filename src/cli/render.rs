@@ -1,15 +1,19 @@
-//! `sky render`: the path tracer on the local cores.
+//! `sky render`: the path tracer, on the local cores (the embedded worker)
+//! or across `sky worker` daemons, through the same farm coordinator.
 
 use super::{usage, EXIT_INVALID};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use sky::atmosphere::Atmosphere;
+use sky::farm::coordinator::{self, FarmError, FarmJob, Options, ProgressMode, WorkerSpec};
+use sky::farm::{config, job, journal};
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
 use sky::render::{self, output, Scene, Settings, WavelengthSampling};
 use sky::table::Table;
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -118,6 +122,87 @@ pub struct RenderArgs {
     /// The naive estimator (analog tracking, no next-event estimation), for comparisons
     #[arg(long, hide = true)]
     naive: bool,
+    /// Render on the `sky worker` daemons of this farm file (see farm/farm.toml)
+    #[arg(long, value_name = "FILE", conflicts_with = "workers", help_heading = "Farm")]
+    farm: Option<PathBuf>,
+    /// Render on these workers, comma-separated HOST:PORT (or http[s]://HOST:PORT)
+    #[arg(long, value_delimiter = ',', value_name = "HOST:PORT", help_heading = "Farm")]
+    workers: Vec<String>,
+    /// The farm's shared token (default: the farm file's token_file, else $SKY_FARM_TOKEN)
+    #[arg(long, value_name = "FILE", help_heading = "Farm")]
+    token_file: Option<PathBuf>,
+    /// CA certificate (PEM) of the workers' TLS certificates (implies https)
+    #[arg(long, value_name = "FILE", help_heading = "Farm")]
+    tls_ca: Option<PathBuf>,
+    /// Render this fraction of the columns a second time on another worker and compare bit for bit
+    #[arg(long, value_name = "F", help_heading = "Farm")]
+    verify_fraction: Option<f64>,
+    /// Seconds a worker may stay silent (no heartbeat) before its task is re-queued [default: 20]
+    #[arg(long, value_name = "S", help_heading = "Farm")]
+    lease_s: Option<f64>,
+    /// Continue an interrupted render from OUT.exr.journal (renders only the missing columns)
+    #[arg(long, help_heading = "Farm")]
+    resume: bool,
+    /// Progress as JSON lines on stdout, one a second, then a summary line (for pipelines)
+    #[arg(long, help_heading = "Farm")]
+    json_progress: bool,
+    /// Fault injection for the farm's tests: SIGKILL this coordinator once N columns are journaled
+    #[arg(long, hide = true)]
+    fault_kill_after_columns: Option<u32>,
+}
+
+/// The workers and policy from --farm / --workers, or None for the
+/// embedded worker.
+fn farm_plan(a: &RenderArgs) -> Result<Option<(Vec<WorkerSpec>, Options)>> {
+    let mut opts = Options::default();
+    let (entries, file) = if let Some(f) = &a.farm {
+        let file = config::FarmFile::load(f)?;
+        (file.workers.iter().map(|w| (w.name.clone(), w.address.clone())).collect::<Vec<_>>(), Some(file))
+    } else if !a.workers.is_empty() {
+        (a.workers.iter().map(|w| (None, w.clone())).collect(), None)
+    } else {
+        return Ok(None);
+    };
+    if let Some(f) = &file {
+        if let Some(l) = f.lease_s {
+            opts.lease = std::time::Duration::from_secs_f64(l);
+        }
+        if let Some(t) = f.task_seconds {
+            opts.task_seconds = t;
+        }
+        if let Some(v) = f.verify_fraction {
+            opts.verify_fraction = v;
+        }
+    }
+    let token_file = a.token_file.clone().or_else(|| file.as_ref().and_then(|f| f.token_file.clone()));
+    opts.token = Some(match token_file {
+        Some(p) => config::read_token(&p).map_err(anyhow::Error::msg)?,
+        None => match std::env::var("SKY_FARM_TOKEN") {
+            Ok(t) if !t.trim().is_empty() => t.trim().to_string(),
+            _ => return usage("a farm needs its token: --token-file FILE, token_file in the farm file, or SKY_FARM_TOKEN"),
+        },
+    });
+    let (ca, domain) = match (&a.tls_ca, file.as_ref().and_then(|f| f.tls.clone())) {
+        (Some(ca), t) => (Some(ca.clone()), t.and_then(|t| t.domain)),
+        (None, Some(t)) => (Some(t.ca), t.domain),
+        (None, None) => (None, None),
+    };
+    if let Some(ca) = &ca {
+        let pem = std::fs::read(ca).with_context(|| format!("--tls-ca {}", ca.display()))?;
+        let mut tls = tonic::transport::ClientTlsConfig::new().ca_certificate(tonic::transport::Certificate::from_pem(pem));
+        if let Some(d) = domain {
+            tls = tls.domain_name(d);
+        }
+        opts.tls = Some(tls);
+    }
+    let workers = entries
+        .into_iter()
+        .map(|(name, address)| {
+            let uri = config::worker_uri(&address, ca.is_some());
+            WorkerSpec::Remote { name: name.unwrap_or_else(|| address.clone()), uri }
+        })
+        .collect();
+    Ok(Some((workers, opts)))
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize), String> {
@@ -190,7 +275,21 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             (Camera::Directions(list), (n, 1))
         }
     };
-    let atm = match Atmosphere::load(&a.atmosphere) {
+    if let Some(v) = a.verify_fraction {
+        if !(0.0..=1.0).contains(&v) {
+            return usage(format!("--verify-fraction must be between 0 and 1, got {v}"));
+        }
+    }
+    if let Some(l) = a.lease_s {
+        if !(l > 0.0 && l.is_finite()) {
+            return usage(format!("--lease-s must be a positive number of seconds, got {l}"));
+        }
+    }
+    if a.resume && a.out.is_none() {
+        return usage("--resume continues OUT.exr.journal and needs --out");
+    }
+    let plan = farm_plan(&a)?;
+    let (atm, bundle) = match Atmosphere::load_bundle(&a.atmosphere) {
         Ok(x) => x,
         Err(e) => {
             eprintln!("{e}");
@@ -223,31 +322,83 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         let c = cancel.clone();
         let _ = ctrlc::set_handler(move || c.store(true, Ordering::SeqCst));
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(a.threads.unwrap_or(0)).build()?;
-    let cache = MieCache::from_env();
+    let threads = a.threads.filter(|&t| t > 0).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let start = Instant::now();
-    let steps = Scene::steps(&atm, &settings);
-    let prep = ProgressBar::new(steps as u64);
-    prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
-    let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
-    prep.finish_and_clear();
-    let prep_s = start.elapsed().as_secs_f64();
-    let n = width * height;
-    let bar = ProgressBar::new(n as u64);
-    bar.set_style(
-        ProgressStyle::with_template("render [{bar:30}] {pos}/{len} px  {per_sec}  eta {eta}  {msg}").unwrap().progress_chars("=> "),
-    );
-    bar.set_message(format!("{} spp", a.spp));
-    let t0 = Instant::now();
-    let result = pool.install(|| render::render(&scene, &settings, &cancel, &|| bar.inc(1)));
-    bar.finish_and_clear();
-    let image = match result {
-        Ok(i) => i,
-        Err(render::RenderError::Cancelled) => {
-            eprintln!("sky render: cancelled; nothing was written");
-            return Ok(ExitCode::from(130));
+    let (workers, local_scene, mut opts) = match plan {
+        Some((w, o)) => (w, None, o),
+        None => {
+            // The embedded worker: prepare the optics here.
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+            let cache = MieCache::from_env();
+            let steps = Scene::steps(&atm, &settings);
+            let prep = ProgressBar::new(steps as u64);
+            prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
+            let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
+            prep.finish_and_clear();
+            (vec![WorkerSpec::Local { threads }], Some(Arc::new(scene)), Options::default())
         }
     };
+    if let Some(v) = a.verify_fraction {
+        opts.verify_fraction = v;
+    }
+    if let Some(l) = a.lease_s {
+        opts.lease = std::time::Duration::from_secs_f64(l);
+    }
+    opts.progress = if a.json_progress { ProgressMode::Json } else { ProgressMode::Bars };
+    opts.fault_kill_after_columns = a.fault_kill_after_columns;
+    let prep_s = start.elapsed().as_secs_f64();
+    let message = job::make(&bundle, &settings);
+    let job = Arc::new(FarmJob { hash: job::hash(&message), message, settings: settings.clone() });
+    // The journal next to the output: every accepted column, synced.
+    let (journal, resumed) = match &a.out {
+        None => (None, BTreeMap::new()),
+        Some(o) => {
+            let jp = journal::path_for(o);
+            let header = journal::Header { job_hash: job.hash.clone(), width: width as u32, height: height as u32 };
+            if a.resume && jp.exists() {
+                let (j, cols) = journal::Journal::resume(&jp, &header)?;
+                if !a.json_progress {
+                    eprintln!("sky render: resuming {}: {} of {width} columns already rendered", jp.display(), cols.len());
+                }
+                (Some(j), cols)
+            } else {
+                if a.resume {
+                    eprintln!("sky render: --resume: there is no {}; rendering from the start", jp.display());
+                } else if jp.exists() {
+                    eprintln!("sky render: replacing {} from an earlier run (use --resume to continue it)", jp.display());
+                }
+                (Some(journal::Journal::create(&jp, &header)?), BTreeMap::new())
+            }
+        }
+    };
+    let journal_path = journal.as_ref().map(|j| j.path().to_path_buf());
+    let t0 = Instant::now();
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+    let outcome = rt.block_on(coordinator::run(job.clone(), workers, local_scene, resumed, journal, opts, cancel.clone()));
+    rt.shutdown_background();
+    let outcome = match outcome {
+        Ok(o) => o,
+        Err(FarmError::Cancelled) => {
+            match &journal_path {
+                Some(j) => eprintln!("sky render: cancelled; no image was written ({} keeps the finished columns: --resume continues)", j.display()),
+                None => eprintln!("sky render: cancelled; nothing was written"),
+            }
+            return Ok(ExitCode::from(130));
+        }
+        Err(e) => {
+            eprintln!("sky render: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let mut pixels = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for col in &outcome.columns {
+            pixels.push(col[y].clone());
+        }
+    }
+    let n = width * height;
+    let image = render::Image { width, height, pixels };
+    let farm_stats = outcome.stats;
     let render_s = t0.elapsed().as_secs_f64();
     let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
     let samples = taken * (1 + settings.spectral_nm.len()) as f64;
@@ -285,6 +436,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     };
     if let Some(o) = &a.out {
         output::write_exr(o, &image, noisy.as_ref(), &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
+        if let Some(j) = &journal_path {
+            let _ = std::fs::remove_file(j);
+        }
     }
     if let Some(p) = &a.png {
         let sun_xyz = sky::spectrum::spectrum_to_xyz(&atm.sun.irradiance_w_m2_nm);
@@ -300,6 +454,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             "prepare_seconds": prep_s, "render_seconds": render_s,
             "paths_per_second": samples / render_s.max(1e-9),
             "spectral_nm": settings.spectral_nm,
+            "farm": farm_stats,
         });
         if let Camera::Directions(list) = &settings.camera {
             v["directions"] = json!(list
@@ -313,6 +468,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 .collect::<Vec<_>>());
         }
         println!("{}", serde_json::to_string_pretty(&v)?);
+    } else if a.json_progress {
+        println!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
     } else {
         eprintln!(
             "rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",

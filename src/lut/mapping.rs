@@ -143,7 +143,7 @@ fn angle(a: DVec3, b: DVec3) -> f64 {
 }
 
 /// The mapping of one slice: sun zenith angle and the switch threshold.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct DirectionMapping {
     pub sun_zenith_deg: f64,
     pub threshold_deg: f64,

@@ -12,7 +12,7 @@ pub fn direction_deg(zenith_deg: f64, azimuth_deg: f64) -> DVec3 {
 }
 
 /// How pixels map to directions.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum Camera {
     /// The full sphere: column → azimuth 0..360°, row → zenith angle 0..180°.
     Equirect,

@@ -36,7 +36,7 @@ use tracer::{Estimator, Tracer};
 pub const KM_LM_PER_W: f64 = 683.0;
 
 /// How each sample picks its wavelength band.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum WavelengthSampling {
     /// ∝ the sun's luminance in the band (ȳ E): the talk's choice.
     Luminance,
@@ -48,8 +48,9 @@ pub enum WavelengthSampling {
     Hero,
 }
 
-/// Everything that defines a render besides the atmosphere.
-#[derive(Debug, Clone)]
+/// Everything that defines a render besides the atmosphere (serialised
+/// into farm jobs).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Settings {
     pub camera: Camera,
     pub width: usize,
@@ -417,6 +418,37 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     }
     empty.samples = taken;
     empty
+}
+
+/// Renders `count` pixel columns from `first` (each top to bottom) on the
+/// current rayon pool: a farm task. `on_pixel` is called after each pixel;
+/// None if `cancel` was set. Pixels are the same pure function of (scene,
+/// settings, pixel) as in [`render`], so a column is bit-identical wherever
+/// it is rendered.
+pub fn render_columns(scene: &Scene, s: &Settings, first: usize, count: usize, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Option<Vec<Vec<PixelResult>>> {
+    use rayon::prelude::*;
+    let h = s.height;
+    let flat: Vec<Option<PixelResult>> = (0..count * h)
+        .into_par_iter()
+        .map(|i| {
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
+            let (c, row) = (i / h, i % h);
+            let r = render_pixel_cancellable(scene, s, row * s.width + first + c, cancel);
+            if cancel.load(Ordering::Relaxed) {
+                return None;
+            }
+            on_pixel();
+            Some(r)
+        })
+        .collect();
+    if cancel.load(Ordering::Relaxed) {
+        return None;
+    }
+    let flat: Option<Vec<PixelResult>> = flat.into_iter().collect();
+    let flat = flat?;
+    Some(flat.chunks(h).map(|c| c.to_vec()).collect())
 }
 
 /// A rendered image, row-major.

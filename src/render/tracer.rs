@@ -30,7 +30,7 @@ enum Flight {
 }
 
 /// Which estimator to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Estimator {
     /// Delta tracking, phase sampling, next-event estimation with ratio
     /// tracking, Russian roulette: what `sky render` ships.

@@ -1,0 +1,39 @@
+//! The render farm: `sky worker` daemons on idle studio PCs and the
+//! coordinator behind `sky render` that splits an image per pixel column
+//! (the talk: "we distribute rendering tasks using multiple PCs", one
+//! column per task).
+//!
+//! - [`job`]: what travels to a worker (the atmosphere with its data files
+//!   and the render settings) and its hash;
+//! - [`tile`]: rendered columns on the wire, and the checks a result must
+//!   pass before it is accepted;
+//! - [`journal`]: accepted columns on disk, so an interrupted render resumes;
+//! - [`worker`]: the gRPC service and the owner-first policies of a worker;
+//! - [`coordinator`]: leases, re-queues, duplicates, verification,
+//!   quarantine and progress, over remote workers or the embedded one.
+
+pub mod config;
+pub mod coordinator;
+pub mod job;
+pub mod journal;
+pub mod tile;
+pub mod worker;
+
+/// The generated gRPC code (proto/sky/farm/v1/farm.proto).
+#[allow(clippy::all, missing_docs)]
+pub mod proto {
+    tonic::include_proto!("sky.farm.v1");
+}
+
+/// The farm protocol's version: a worker and a coordinator must agree.
+pub const PROTOCOL_VERSION: u32 = 1;
+
+/// The build a job needs: only the same build renders bit-identically.
+pub fn build_version() -> String {
+    crate::VERSION.to_string()
+}
+
+/// The largest message a worker or coordinator accepts, bytes (a job with
+/// its data files is well under 8 MiB; a tile of 64 columns of a 4096-high
+/// image with 4 spectral lines is about 36 MiB).
+pub const MAX_MESSAGE_BYTES: usize = 64 << 20;

@@ -1,0 +1,427 @@
+//! `sky worker`: the gRPC service that renders column tasks with the same
+//! code as a local render, and the policies that put the PC's owner first
+//! (a thread limit, low priority, pause and resume by signal or RPC, a
+//! time-of-day schedule, and pausing while the owner's programs keep the
+//! CPU busy). A paused worker fails its running task with UNAVAILABLE
+//! "paused", so the coordinator re-queues it at once.
+
+use super::proto::worker_server::{Worker, WorkerServer};
+use super::proto::{self, ControlAction, WorkerState};
+use super::{job, tile, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
+use crate::mie::MieCache;
+use crate::render::{self, Scene, Settings};
+use std::collections::VecDeque;
+use std::pin::Pin;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tokio_stream::Stream;
+use tonic::{Request, Response, Status};
+
+/// Faults a worker can be told to commit, for the farm's own tests (hidden
+/// flags of `sky worker`).
+#[derive(Debug, Clone, Default)]
+pub struct Faults {
+    /// After this many tasks, accept tasks and never answer again.
+    pub stall_after_tasks: Option<u64>,
+    /// Send tiles with a NaN in them.
+    pub corrupt_tiles: bool,
+    /// Send tiles whose values are off by one ulp (a wrong but plausible
+    /// result, which only verification catches).
+    pub perturb_tiles: bool,
+    /// Claim this protocol version instead of the real one.
+    pub protocol_version: Option<u32>,
+    /// On this task (counting from 0), SIGKILL the worker's own process a
+    /// moment after the render starts.
+    pub sigkill_on_task: Option<u64>,
+}
+
+/// Why a worker is paused (any of them pauses it).
+#[derive(Debug, Clone, Default)]
+pub struct PauseState {
+    /// By signal or RPC.
+    pub manual: Option<String>,
+    /// Outside its schedule.
+    pub schedule: bool,
+    /// The owner's programs keep the CPU busy.
+    pub load: bool,
+}
+
+impl PauseState {
+    pub fn reason(&self) -> Option<String> {
+        if let Some(m) = &self.manual {
+            return Some(m.clone());
+        }
+        if self.schedule {
+            return Some("schedule".into());
+        }
+        if self.load {
+            return Some("load".into());
+        }
+        None
+    }
+}
+
+/// A worker's configuration.
+pub struct Config {
+    pub name: String,
+    pub threads: usize,
+    /// The shared token every call must carry.
+    pub token: String,
+    pub faults: Faults,
+    pub cache: MieCache,
+}
+
+/// The worker's shared state.
+pub struct Shared {
+    pub config: Config,
+    pool: rayon::ThreadPool,
+    /// Prepared jobs, most recent last (two kept).
+    scenes: Mutex<VecDeque<(String, Arc<(Scene, Settings)>)>>,
+    pause: Mutex<PauseState>,
+    /// True while paused; running tasks watch it.
+    paused_tx: watch::Sender<bool>,
+    /// One task renders at a time; others wait their turn (heartbeating).
+    turn: tokio::sync::Mutex<()>,
+    busy: AtomicBool,
+    tasks_started: AtomicU64,
+    pub tasks_done: AtomicU64,
+    pub columns_done: AtomicU64,
+}
+
+impl Shared {
+    pub fn new(config: Config) -> Result<Arc<Shared>, rayon::ThreadPoolBuildError> {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(config.threads).thread_name(|i| format!("sky-worker-{i}")).build()?;
+        let (paused_tx, _) = watch::channel(false);
+        Ok(Arc::new(Shared {
+            config,
+            pool,
+            scenes: Mutex::new(VecDeque::new()),
+            pause: Mutex::new(PauseState::default()),
+            paused_tx,
+            turn: tokio::sync::Mutex::new(()),
+            busy: AtomicBool::new(false),
+            tasks_started: AtomicU64::new(0),
+            tasks_done: AtomicU64::new(0),
+            columns_done: AtomicU64::new(0),
+        }))
+    }
+
+    /// Changes the pause state and tells running tasks.
+    pub fn update_pause(&self, f: impl FnOnce(&mut PauseState)) -> Option<String> {
+        let mut p = self.pause.lock().unwrap();
+        let before = p.reason();
+        f(&mut p);
+        let after = p.reason();
+        if before != after {
+            match &after {
+                Some(r) => eprintln!("sky worker {}: paused ({r})", self.config.name),
+                None => eprintln!("sky worker {}: resumed", self.config.name),
+            }
+        }
+        self.paused_tx.send_replace(after.is_some());
+        after
+    }
+
+    pub fn paused_reason(&self) -> Option<String> {
+        self.pause.lock().unwrap().reason()
+    }
+
+    fn state(&self) -> WorkerState {
+        if self.paused_reason().is_some() {
+            WorkerState::Paused
+        } else if self.busy.load(Ordering::Relaxed) {
+            WorkerState::Busy
+        } else {
+            WorkerState::Idle
+        }
+    }
+
+    fn protocol_version(&self) -> u32 {
+        self.config.faults.protocol_version.unwrap_or(PROTOCOL_VERSION)
+    }
+
+    fn scene(&self, hash: &str) -> Option<Arc<(Scene, Settings)>> {
+        self.scenes.lock().unwrap().iter().find(|(h, _)| h == hash).map(|(_, s)| s.clone())
+    }
+
+    fn keep_scene(&self, hash: String, scene: Arc<(Scene, Settings)>) {
+        let mut s = self.scenes.lock().unwrap();
+        s.retain(|(h, _)| *h != hash);
+        s.push_back((hash, scene));
+        while s.len() > 2 {
+            s.pop_front();
+        }
+    }
+}
+
+/// The gRPC service.
+#[derive(Clone)]
+pub struct Service {
+    pub shared: Arc<Shared>,
+}
+
+type EventStream = Pin<Box<dyn Stream<Item = Result<proto::RenderEvent, Status>> + Send>>;
+
+fn heartbeat(pixels_done: u64, preparing: bool) -> proto::RenderEvent {
+    proto::RenderEvent { event: Some(proto::render_event::Event::Heartbeat(proto::Heartbeat { pixels_done, preparing })) }
+}
+
+#[tonic::async_trait]
+impl Worker for Service {
+    async fn hello(&self, request: Request<proto::HelloRequest>) -> Result<Response<proto::HelloReply>, Status> {
+        let r = request.into_inner();
+        let s = &self.shared;
+        if r.protocol_version != s.protocol_version() {
+            eprintln!("sky worker {}: refused coordinator {:?}: it speaks farm protocol {}, this worker {}", s.config.name, r.coordinator, r.protocol_version, s.protocol_version());
+        }
+        Ok(Response::new(proto::HelloReply {
+            protocol_version: s.protocol_version(),
+            build_version: super::build_version(),
+            name: s.config.name.clone(),
+            threads: s.config.threads as u32,
+            state: s.state() as i32,
+            paused_reason: s.paused_reason().unwrap_or_default(),
+        }))
+    }
+
+    async fn control(&self, request: Request<proto::ControlRequest>) -> Result<Response<proto::ControlReply>, Status> {
+        let s = &self.shared;
+        match ControlAction::try_from(request.into_inner().action).unwrap_or(ControlAction::Unspecified) {
+            ControlAction::Pause => {
+                s.update_pause(|p| p.manual = Some("rpc".into()));
+            }
+            ControlAction::Resume => {
+                s.update_pause(|p| p.manual = None);
+            }
+            ControlAction::Unspecified => {}
+        }
+        Ok(Response::new(proto::ControlReply {
+            state: s.state() as i32,
+            paused_reason: s.paused_reason().unwrap_or_default(),
+            tasks_done: s.tasks_done.load(Ordering::Relaxed),
+            columns_done: s.columns_done.load(Ordering::Relaxed),
+        }))
+    }
+
+    type RenderStream = EventStream;
+
+    async fn render(&self, request: Request<proto::RenderTask>) -> Result<Response<EventStream>, Status> {
+        let peer = request.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
+        let task = request.into_inner();
+        let s = self.shared.clone();
+        if task.protocol_version != s.protocol_version() {
+            return Err(Status::failed_precondition(format!(
+                "this worker speaks farm protocol {}, the task protocol {}",
+                s.protocol_version(),
+                task.protocol_version
+            )));
+        }
+        if task.build_version != super::build_version() {
+            return Err(Status::failed_precondition(format!(
+                "this worker is sky {}, the task is from sky {}: only the same build renders bit-identically",
+                super::build_version(),
+                task.build_version
+            )));
+        }
+        if let Some(reason) = s.paused_reason() {
+            return Err(Status::unavailable(format!("paused ({reason})")));
+        }
+        let started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
+        if s.config.faults.stall_after_tasks.is_some_and(|n| started >= n) {
+            eprintln!("sky worker {}: stalling on task {} (fault injection)", s.config.name, task.task_id);
+            return Ok(Response::new(Box::pin(tokio_stream::pending())));
+        }
+        // The job: known already, or carried by the task.
+        let prepared = s.scene(&task.job_hash);
+        if prepared.is_none() && task.job.is_none() {
+            return Err(Status::not_found(format!("job {} is unknown to this worker; send it with the task", task.job_hash)));
+        }
+        if let Some(j) = &task.job {
+            let h = job::hash(j);
+            if h != task.job_hash {
+                return Err(Status::invalid_argument(format!("the task's job hashes to {h}, not the {} it claims", task.job_hash)));
+            }
+        }
+        if s.config.faults.sigkill_on_task == Some(started) {
+            eprintln!("sky worker {}: killing itself mid-task (fault injection)", s.config.name);
+            tokio::spawn(async {
+                tokio::time::sleep(Duration::from_millis(150)).await;
+                // SAFETY: sending a signal to our own process.
+                #[cfg(unix)]
+                unsafe {
+                    libc::kill(libc::getpid(), libc::SIGKILL);
+                }
+            });
+        }
+        let (tx, rx) = mpsc::channel::<Result<proto::RenderEvent, Status>>(8);
+        tokio::spawn(async move {
+            let result = run_task(&s, task, prepared, &tx).await;
+            match result {
+                Ok(t) => {
+                    let _ = tx.send(Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) })).await;
+                }
+                Err(status) => {
+                    if status.code() != tonic::Code::Cancelled {
+                        eprintln!("sky worker {}: task from {peer}: {}", s.config.name, status.message());
+                    }
+                    let _ = tx.send(Err(status)).await;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx))))
+    }
+}
+
+/// Runs one task to its tile, heartbeating through `tx`.
+async fn run_task(
+    s: &Arc<Shared>,
+    task: proto::RenderTask,
+    prepared: Option<Arc<(Scene, Settings)>>,
+    tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>,
+) -> Result<proto::Tile, Status> {
+    let mut paused = s.paused_tx.subscribe();
+    let cancel = Arc::new(AtomicBool::new(false));
+    let pixels = Arc::new(AtomicU64::new(0));
+    // Wait for our turn, heartbeating.
+    let _turn = loop {
+        tokio::select! {
+            t = s.turn.lock() => break t,
+            _ = tokio::time::sleep(Duration::from_millis(500)) => {
+                if tx.send(Ok(heartbeat(0, false))).await.is_err() {
+                    return Err(Status::cancelled("the coordinator went away"));
+                }
+            }
+        }
+    };
+    s.busy.store(true, Ordering::Relaxed);
+    struct NotBusy<'a>(&'a Shared);
+    impl Drop for NotBusy<'_> {
+        fn drop(&mut self) {
+            self.0.busy.store(false, Ordering::Relaxed);
+        }
+    }
+    let _not_busy = NotBusy(s);
+    // Prepare the job's optics if needed.
+    let scene = match prepared {
+        Some(p) => p,
+        None => {
+            let j = task.job.clone().expect("checked by the caller");
+            let shared = s.clone();
+            let work = tokio::task::spawn_blocking(move || -> Result<Arc<(Scene, Settings)>, Status> {
+                let (atm, settings) = job::open(&j).map_err(|e| Status::invalid_argument(e.to_string()))?;
+                let scene = shared.pool.install(|| Scene::new(&atm, &settings, &shared.config.cache, &|| {}));
+                Ok(Arc::new((scene, settings)))
+            });
+            let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true)).await? {
+                Ok(r) => r?,
+                Err(e) => return Err(Status::internal(format!("preparing the job panicked: {e}"))),
+            };
+            s.keep_scene(task.job_hash.clone(), scene.clone());
+            scene
+        }
+    };
+    let settings = &scene.1;
+    let (first, count) = (task.first_column as usize, task.columns as usize);
+    if count == 0 || first + count > settings.width {
+        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the job's {} columns", settings.width)));
+    }
+    let work = {
+        let (s2, scene, cancel, pixels) = (s.clone(), scene.clone(), cancel.clone(), pixels.clone());
+        tokio::task::spawn_blocking(move || {
+            s2.pool.install(|| {
+                render::render_columns(&scene.0, &scene.1, first, count, &cancel, &|| {
+                    pixels.fetch_add(1, Ordering::Relaxed);
+                })
+            })
+        })
+    };
+    let pixels_hb = pixels.clone();
+    let columns = watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false))
+        .await?
+        .map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
+    let Some(columns) = columns else {
+        return Err(Status::cancelled("cancelled"));
+    };
+    let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, settings.height as u32, settings.spectral_nm.len(), &columns);
+    if s.config.faults.corrupt_tiles {
+        t.values[0] = f64::NAN;
+    }
+    if s.config.faults.perturb_tiles {
+        t.values[1] = f64::from_bits(t.values[1].to_bits() + 1);
+    }
+    s.tasks_done.fetch_add(1, Ordering::Relaxed);
+    s.columns_done.fetch_add(count as u64, Ordering::Relaxed);
+    Ok(t)
+}
+
+/// Waits for blocking work while sending a heartbeat a second, cancelling
+/// it if the coordinator goes away or the worker is paused.
+async fn watch_blocking<T>(
+    mut work: tokio::task::JoinHandle<T>,
+    tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>,
+    paused: &mut watch::Receiver<bool>,
+    cancel: &AtomicBool,
+    beat: impl Fn() -> proto::RenderEvent,
+) -> Result<Result<T, String>, Status> {
+    let mut tick = tokio::time::interval(Duration::from_millis(1000));
+    tick.tick().await;
+    loop {
+        tokio::select! {
+            r = &mut work => return Ok(r.map_err(|e| e.to_string())),
+            _ = tick.tick() => {
+                if tx.send(Ok(beat())).await.is_err() {
+                    cancel.store(true, Ordering::Relaxed);
+                    let _ = work.await;
+                    return Err(Status::cancelled("the coordinator went away"));
+                }
+            }
+            changed = paused.changed() => {
+                if changed.is_ok() && *paused.borrow() {
+                    cancel.store(true, Ordering::Relaxed);
+                    let _ = work.await;
+                    return Err(Status::unavailable("paused"));
+                }
+            }
+        }
+    }
+}
+
+/// Compares two byte strings in time independent of where they differ.
+fn same_token(a: &[u8], b: &[u8]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// The service with its token check and message limits.
+pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedService<WorkerServer<Service>, impl tonic::service::Interceptor + Clone> {
+    let token = shared.config.token.clone();
+    let name = shared.config.name.clone();
+    let check = move |req: Request<()>| -> Result<Request<()>, Status> {
+        let got = req.metadata().get("authorization").and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer "));
+        match got {
+            Some(t) if same_token(t.as_bytes(), token.as_bytes()) => Ok(req),
+            Some(_) => {
+                let peer = req.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
+                eprintln!("sky worker {name}: refused {peer}: wrong token");
+                Err(Status::unauthenticated("wrong farm token"))
+            }
+            None => Err(Status::unauthenticated("missing farm token (authorization: Bearer ...)")),
+        }
+    };
+    let svc = WorkerServer::new(Service { shared }).max_decoding_message_size(MAX_MESSAGE_BYTES).max_encoding_message_size(MAX_MESSAGE_BYTES);
+    tonic::service::interceptor::InterceptedService::new(svc, check)
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn tokens_compare() {
+        assert!(super::same_token(b"abc", b"abc"));
+        assert!(!super::same_token(b"abc", b"abd"));
+        assert!(!super::same_token(b"abc", b"ab"));
+    }
+}

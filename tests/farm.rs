@@ -1,0 +1,300 @@
+//! The render farm on loopback, with real `sky worker` processes: renders
+//! across workers are bit-identical to a local render whatever happens to
+//! the workers (killed, stalled, sending garbage or wrong results) or to
+//! the coordinator (killed and resumed); bad calls (a wrong token, another
+//! protocol, garbage bytes, an oversized message) get clear errors while
+//! the workers keep serving.
+
+use sky::farm::coordinator::connect;
+use sky::farm::proto;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::Duration;
+
+const SKY: &str = env!("CARGO_BIN_EXE_sky");
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A small render: the analytic-HG atmosphere needs no Mie tables, so the
+/// workers prepare it in a moment.
+fn render_args(out: &Path) -> Vec<String> {
+    let atm = root().join("atmospheres/analytic-hg.toml");
+    ["render", atm.to_str().unwrap(), "--camera", "equirect", "--size", "32x6", "--spp", "12", "--sun-zenith-deg", "70", "--seed", "5", "--out", out.to_str().unwrap()]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+}
+
+struct Worker {
+    child: Child,
+    addr: String,
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+struct Farm {
+    dir: tempfile::TempDir,
+    workers: Vec<Worker>,
+}
+
+impl Farm {
+    fn new() -> Farm {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::write(dir.path().join("token"), "s3cret-farm-token\n").unwrap();
+        std::fs::write(dir.path().join("wrong-token"), "not-the-token\n").unwrap();
+        Farm { dir, workers: Vec::new() }
+    }
+
+    fn path(&self, name: &str) -> PathBuf {
+        self.dir.path().join(name)
+    }
+
+    /// Starts a worker with extra (fault) flags; returns its index.
+    fn start(&mut self, name: &str, extra: &[&str]) -> usize {
+        let mut child = Command::new(SKY)
+            .args(["worker", "--listen", "127.0.0.1:0", "--threads", "1", "--nice", "0", "--owner-load-limit", "1", "--name", name])
+            .arg("--token-file")
+            .arg(self.path("token"))
+            .args(extra)
+            .env("SKY_CACHE_DIR", "off")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("worker said {line:?}")).to_string();
+        self.workers.push(Worker { child, addr });
+        self.workers.len() - 1
+    }
+
+    fn list(&self, which: &[usize]) -> String {
+        which.iter().map(|&i| self.workers[i].addr.clone()).collect::<Vec<_>>().join(",")
+    }
+
+    /// `sky render` across the given workers with extra flags.
+    fn render(&self, out: &str, which: &[usize], extra: &[&str]) -> Output {
+        let mut args = render_args(&self.path(out));
+        args.extend(["--workers".to_string(), self.list(which), "--token-file".to_string(), self.path("token").to_str().unwrap().to_string()]);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap()
+    }
+
+    /// The local render with the embedded worker, as reference.
+    fn local(&self, out: &str) -> Vec<u8> {
+        let o = Command::new(SKY).args(render_args(&self.path(out))).env("SKY_CACHE_DIR", "off").output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(self.path(out)).unwrap()
+    }
+
+    fn alive(&mut self, i: usize) -> bool {
+        self.workers[i].child.try_wait().unwrap().is_none()
+    }
+}
+
+fn same_file(a: &[u8], path: &Path) -> bool {
+    let b = std::fs::read(path).unwrap_or_default();
+    blake3::hash(a) == blake3::hash(&b)
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The JSON summary line (`{"event": "done", ...}`) of a --json-progress run.
+fn summary(o: &Output) -> serde_json::Value {
+    let out = String::from_utf8_lossy(&o.stdout);
+    let line = out.lines().rev().find(|l| l.contains("\"done\"")).unwrap_or_else(|| panic!("no summary in {out}\n{}", stderr(o)));
+    serde_json::from_str(line).unwrap()
+}
+
+#[test]
+fn three_workers_render_bit_identically_to_a_local_render() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    for n in ["a", "b", "c"] {
+        farm.start(n, &[]);
+    }
+    let o = farm.render("farm.exr", &[0, 1, 2], &["--json-progress"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")), "farm and local renders differ");
+    let s = summary(&o);
+    assert_eq!(s["farm"]["columns_rendered"], 32);
+    // The image went out in several tasks, and no worker was lost. (Which
+    // worker did how much depends on timing: a slow starter's first task may
+    // be duplicated and won by a faster one.)
+    assert!(s["farm"]["tasks"].as_u64().unwrap() >= 3, "{s}");
+    let workers = s["farm"]["workers"].as_array().unwrap();
+    assert_eq!(workers.len(), 3);
+    assert!(workers.iter().all(|w| w["quarantined"].is_null()), "{s}");
+    let columns: u64 = workers.iter().map(|w| w["columns_done"].as_u64().unwrap()).sum();
+    assert!(columns >= 32, "{s}");
+    assert!(!farm.path("farm.exr.journal").exists(), "the journal is removed after success");
+}
+
+#[test]
+fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    farm.start("good", &[]);
+    farm.start("killed", &["--fault-sigkill-on-task", "0"]);
+    farm.start("stalled", &["--fault-stall-after", "0"]);
+    farm.start("garbage", &["--fault-corrupt"]);
+    let o = farm.render("farm.exr", &[0, 1, 2, 3], &["--json-progress", "--lease-s", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")), "the result changed");
+    assert!(!farm.alive(1), "the killed worker should be dead");
+    let s = summary(&o);
+    let workers = s["farm"]["workers"].as_array().unwrap();
+    // The garbage worker's tiles were refused every time: quarantined.
+    let g = workers.iter().find(|w| w["name"] == farm.workers[3].addr).unwrap().clone();
+    assert!(g["quarantined"].is_string(), "{g}");
+    assert_eq!(g["columns_done"], 0, "{g}");
+    assert!(s["farm"]["requeued"].as_u64().unwrap() >= 3, "{s}");
+    assert!(stderr(&o).contains("invalid result: tile value 0 is NaN"), "{}", stderr(&o));
+    // The stalled worker never delivered; its task was re-queued after the
+    // lease or duplicated and won elsewhere.
+    let st = workers.iter().find(|w| w["name"] == farm.workers[2].addr).unwrap();
+    assert_eq!(st["tasks_done"], 0, "{s}");
+    let k = workers.iter().find(|w| w["name"] == farm.workers[1].addr).unwrap();
+    assert_eq!(k["tasks_done"], 0, "{s}");
+}
+
+#[test]
+fn a_killed_coordinator_resumes_without_rendering_twice() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    farm.start("a", &[]);
+    farm.start("b", &[]);
+    let o = farm.render("farm.exr", &[0, 1], &["--fault-kill-after-columns", "10"]);
+    assert!(!o.status.success());
+    assert!(!farm.path("farm.exr").exists(), "a killed render must not leave an image");
+    assert!(farm.path("farm.exr.journal").exists());
+    let o = farm.render("farm.exr", &[0, 1], &["--resume", "--json-progress"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")), "the resumed render differs");
+    let s = summary(&o);
+    let resumed = s["farm"]["columns_resumed"].as_u64().unwrap();
+    let rendered = s["farm"]["columns_rendered"].as_u64().unwrap();
+    assert!(resumed >= 10, "{s}");
+    assert_eq!(resumed + rendered, 32, "columns rendered twice or lost: {s}");
+    // And the workers rendered exactly the missing columns (duplicates aside).
+    let dup = s["farm"]["duplicates"].as_u64().unwrap();
+    let by_workers: u64 = s["farm"]["workers"].as_array().unwrap().iter().map(|w| w["columns_done"].as_u64().unwrap()).sum();
+    assert!(by_workers >= rendered && (dup > 0 || by_workers == rendered), "{s}");
+}
+
+#[test]
+fn verification_catches_a_worker_with_wrong_results() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    farm.start("a", &[]);
+    farm.start("b", &[]);
+    farm.start("liar", &["--fault-perturb"]);
+    let o = farm.render("farm.exr", &[0, 1, 2], &["--json-progress", "--verify-fraction", "1"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")), "a wrong result got through");
+    let s = summary(&o);
+    let liar = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["name"] == farm.workers[2].addr).unwrap().clone();
+    if liar["tasks_done"].as_u64().unwrap() > 0 {
+        assert!(liar["quarantined"].as_str().unwrap_or("").contains("differed bit for bit"), "{s}");
+        assert!(s["farm"]["verify_mismatches"].as_u64().unwrap() >= 1, "{s}");
+    }
+    assert!(s["farm"]["columns_verified"].as_u64().unwrap() >= 1, "{s}");
+}
+
+#[test]
+fn bad_calls_get_clear_errors_and_workers_keep_serving() {
+    let mut farm = Farm::new();
+    let good = farm.start("good", &[]);
+    let old = farm.start("old", &["--fault-protocol", "99"]);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let uri = format!("http://{}", farm.workers[good].addr);
+    let hello = || proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+    rt.block_on(async {
+        // A wrong token.
+        let mut c = connect(&uri, Some("not-the-token"), None, Duration::from_secs(5)).await.unwrap();
+        let e = c.hello(hello()).await.unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        assert!(e.message().contains("wrong farm token"), "{e}");
+        // No token.
+        let mut c = connect(&uri, None, None, Duration::from_secs(5)).await.unwrap();
+        let e = c.hello(hello()).await.unwrap_err();
+        assert!(e.message().contains("missing farm token"), "{e}");
+        // Another protocol version in a task.
+        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let task = proto::RenderTask { protocol_version: 99, build_version: sky::farm::build_version(), job_hash: "x".into(), job: None, task_id: 1, first_column: 0, columns: 1 };
+        let e = c.render(task).await.err().expect("refused");
+        assert_eq!(e.code(), tonic::Code::FailedPrecondition);
+        assert!(e.message().contains("farm protocol 1") && e.message().contains("protocol 99"), "{e}");
+        // An oversized message (a 70 MiB data file in a job).
+        let big = proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), files: vec![proto::DataFile { name: "big.csv".into(), content: vec![b'1'; 70 << 20] }], ..Default::default() };
+        let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "x".into(), job: Some(big), task_id: 2, first_column: 0, columns: 1 };
+        let mut big_client = c.clone().max_encoding_message_size(usize::MAX);
+        let e = big_client.render(task).await.err().expect("refused");
+        assert!(matches!(e.code(), tonic::Code::ResourceExhausted | tonic::Code::OutOfRange | tonic::Code::InvalidArgument), "{e:?}");
+        assert!(e.message().to_lowercase().contains("message") || e.message().contains("size") || e.message().contains("large"), "{e:?}");
+        // A job that does not match its hash.
+        let job = proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), ..Default::default() };
+        let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "not-its-hash".into(), job: Some(job), task_id: 3, first_column: 0, columns: 1 };
+        let e = c.render(task).await.err().expect("refused");
+        assert_eq!(e.code(), tonic::Code::InvalidArgument);
+        assert!(e.message().contains("hashes to"), "{e}");
+    });
+    // Garbage bytes on the port: the connection is dropped...
+    let mut s = std::net::TcpStream::connect(&farm.workers[good].addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(5))).unwrap();
+    s.write_all(b"GET / HTTP/1.0\r\n\r\n\x00\x01\x02 garbage \xff\xfe").unwrap();
+    let mut buf = Vec::new();
+    let _ = s.read_to_end(&mut buf);
+    drop(s);
+    // ...and the worker still serves.
+    rt.block_on(async {
+        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let r = c.hello(hello()).await.unwrap().into_inner();
+        assert_eq!(r.name, "good");
+    });
+    // A coordinator refuses a worker of another protocol, with a message
+    // naming both versions, and a wrong token fails the render clearly.
+    let o = farm.render("old.exr", &[old], &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("speaks farm protocol 99, this coordinator 1"), "{}", stderr(&o));
+    assert!(!farm.path("old.exr").exists());
+    let mut args = render_args(&farm.path("tok.exr"));
+    args.extend(["--workers".into(), farm.list(&[good]), "--token-file".into(), farm.path("wrong-token").to_str().unwrap().into()]);
+    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("refused the token"), "{}", stderr(&o));
+    // The workers are still alive and serving after all that.
+    assert!(farm.alive(good) && farm.alive(old));
+    let o = farm.render("ok.exr", &[good], &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn a_paused_worker_gives_its_work_back() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    // Pause b by signal before the render: it takes no task.
+    unsafe {
+        libc::kill(farm.workers[b].child.id() as i32, libc::SIGUSR1);
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let o = farm.render("farm.exr", &[a, b], &["--json-progress"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")));
+    let s = summary(&o);
+    let wb = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["name"] == farm.workers[b].addr).unwrap().clone();
+    assert_eq!(wb["tasks_done"], 0, "{s}");
+    assert!(wb["state"].as_str().unwrap().contains("paused"), "{s}");
+}
