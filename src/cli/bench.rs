@@ -70,6 +70,66 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The farm's overhead and scaling, in one run: a plain local render (no
+    /// coordinator) against the embedded worker and against one `sky worker`
+    /// process on the same cores; then two single-thread workers against one.
+    /// Workers are warmed on the job first, so only rendering is timed
+    Farm {
+        #[arg(long, default_value = "atmospheres/clear.toml")]
+        atmosphere: PathBuf,
+        /// Image size (equirect)
+        #[arg(long, default_value = "96x48")]
+        size: String,
+        #[arg(long, default_value_t = 128)]
+        spp: u32,
+        /// Threads for the overhead comparison (default: all cores)
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Rounds of the comparison (the fastest time of each contender counts)
+        #[arg(long, default_value_t = 3)]
+        rounds: usize,
+        /// Machine-readable output
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// A `sky worker` child process for benchmarks, killed on drop.
+struct BenchWorker {
+    child: std::process::Child,
+    uri: String,
+}
+
+impl Drop for BenchWorker {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn spawn_worker(threads: usize, token: &str, name: &str) -> Result<BenchWorker> {
+    use std::io::BufRead;
+    let exe = std::env::current_exe()?;
+    let mut child = std::process::Command::new(exe)
+        .args(["worker", "--listen", "127.0.0.1:0", "--nice", "0", "--owner-load-limit", "1", "--name", name, "--threads", &threads.to_string()])
+        .env("SKY_FARM_TOKEN", token)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .context("starting a worker")?;
+    let mut line = String::new();
+    std::io::BufReader::new(child.stdout.take().unwrap()).read_line(&mut line)?;
+    let addr = line.trim().strip_prefix("listening on ").context("worker did not start")?.to_string();
+    Ok(BenchWorker { child, uri: format!("http://{addr}") })
+}
+
+/// Times one farm render of `job` on `workers` (seconds).
+fn farm_seconds(rt: &tokio::runtime::Runtime, job: &std::sync::Arc<sky::farm::coordinator::FarmJob>, workers: Vec<sky::farm::coordinator::WorkerSpec>, scene: Option<std::sync::Arc<Scene>>, token: &str) -> Result<f64> {
+    use sky::farm::coordinator::{run, Options};
+    let opts = Options { token: Some(token.to_string()), ..Options::default() };
+    let t = Instant::now();
+    rt.block_on(run(job.clone(), workers, scene, Default::default(), None, opts, std::sync::Arc::new(AtomicBool::new(false))))?;
+    Ok(t.elapsed().as_secs_f64())
 }
 
 fn sunset_settings(spp: u32, seed: u64) -> Settings {
@@ -288,6 +348,66 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                         z[i]
                     );
                 }
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        BenchCommand::Farm { atmosphere, size, spp, threads, rounds, json } => {
+            use sky::farm::coordinator::{FarmJob, WorkerSpec};
+            use std::sync::Arc;
+            let (w, h) = size.split_once('x').and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).context("--size WxH")?;
+            let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+            let (atm, bundle) = Atmosphere::load_bundle(&atmosphere).map_err(anyhow::Error::new)?;
+            let mut settings = Settings::directions(Vec::new(), 70.0, Vec::new(), spp, 1, true);
+            settings.camera = Camera::Equirect;
+            settings.width = w;
+            settings.height = h;
+            settings.xyz = true;
+            settings.wavelength_sampling = WavelengthSampling::Hero;
+            let message = sky::farm::job::make(&bundle, &settings);
+            let job = Arc::new(FarmJob { hash: sky::farm::job::hash(&message), message, settings: settings.clone() });
+            let cache = sky::mie::MieCache::from_env();
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+            let scene = Arc::new(pool.install(|| Scene::new(&atm, &settings, &cache, &|| {})));
+            let token = format!("bench-{}", std::process::id());
+            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
+            // Workers, warmed on the job (optics prepared and cached by hash).
+            let big = spawn_worker(threads, &token, "bench-all-cores")?;
+            let one_a = spawn_worker(1, &token, "bench-1a")?;
+            let one_b = spawn_worker(1, &token, "bench-1b")?;
+            let remote = |w: &BenchWorker| WorkerSpec::Remote { name: w.uri.clone(), uri: w.uri.clone() };
+            for wk in [&big, &one_a, &one_b] {
+                farm_seconds(&rt, &job, vec![remote(wk)], None, &token)?;
+            }
+            // Rounds alternating the contenders; the fastest of each counts
+            // (the usual robust statistic on a shared machine).
+            let (mut t_plain, mut t_embedded, mut t_remote, mut t_one, mut t_two) = (f64::MAX, f64::MAX, f64::MAX, f64::MAX, f64::MAX);
+            for _ in 0..rounds {
+                // 1. Overhead, on the same cores.
+                let t = Instant::now();
+                pool.install(|| rend::render(&scene, &settings, &AtomicBool::new(false), &|| {})).map_err(|e| anyhow::anyhow!("{e}"))?;
+                t_plain = t_plain.min(t.elapsed().as_secs_f64());
+                t_embedded = t_embedded.min(farm_seconds(&rt, &job, vec![WorkerSpec::Local { threads }], Some(scene.clone()), &token)?);
+                t_remote = t_remote.min(farm_seconds(&rt, &job, vec![remote(&big)], None, &token)?);
+                // 2. Scaling: two single-thread workers against one.
+                t_one = t_one.min(farm_seconds(&rt, &job, vec![remote(&one_a)], None, &token)?);
+                t_two = t_two.min(farm_seconds(&rt, &job, vec![remote(&one_a), remote(&one_b)], None, &token)?);
+            }
+            drop(big);
+            let v = json!({
+                "benchmark": "farm", "atmosphere": atmosphere.display().to_string(), "width": w, "height": h, "spp": spp, "threads": threads, "rounds": rounds,
+                "plain_local_s": t_plain, "embedded_worker_s": t_embedded, "one_remote_worker_s": t_remote,
+                "embedded_overhead": t_embedded / t_plain - 1.0, "remote_overhead": t_remote / t_plain - 1.0,
+                "one_single_thread_worker_s": t_one, "two_single_thread_workers_s": t_two, "scaling_2_vs_1": t_one / t_two,
+            });
+            if json {
+                println!("{}", serde_json::to_string_pretty(&v)?);
+            } else {
+                println!("farm benchmark, {} {w}x{h} at {spp} spp, {threads} threads (one run, fastest of {rounds} rounds; workers warmed on the job)", atmosphere.display());
+                println!("  plain local render (no coordinator)   {t_plain:>8.2} s");
+                println!("  embedded worker through the farm path {t_embedded:>8.2} s  overhead {:+.1} %", 100.0 * (t_embedded / t_plain - 1.0));
+                println!("  one sky worker process over loopback  {t_remote:>8.2} s  overhead {:+.1} %", 100.0 * (t_remote / t_plain - 1.0));
+                println!("  one single-thread worker              {t_one:>8.2} s");
+                println!("  two single-thread workers             {t_two:>8.2} s  speed-up {:.2}x", t_one / t_two);
             }
             Ok(ExitCode::SUCCESS)
         }
