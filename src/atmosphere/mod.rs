@@ -32,7 +32,7 @@ pub struct LoadError {
 }
 
 /// Planet geometry.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum Geometry {
     Spherical,
     /// Horizontally infinite slab: for validation against 1-D codes.

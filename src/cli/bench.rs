@@ -363,11 +363,11 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             settings.height = h;
             settings.xyz = true;
             settings.wavelength_sampling = WavelengthSampling::Hero;
-            let message = sky::farm::job::make(&bundle, &settings);
-            let job = Arc::new(FarmJob { hash: sky::farm::job::hash(&message), message, settings: settings.clone() });
             let cache = sky::mie::MieCache::from_env();
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
             let scene = Arc::new(pool.install(|| Scene::new(&atm, &settings, &cache, &|| {})));
+            let message = sky::farm::job::make(&bundle, &settings, Some(&scene));
+            let job = Arc::new(FarmJob { hash: sky::farm::job::hash(&message), message, settings: settings.clone() });
             let token = format!("bench-{}", std::process::id());
             let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
             // Workers, warmed on the job (optics prepared and cached by hash).

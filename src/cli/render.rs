@@ -324,19 +324,21 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
     let threads = a.threads.filter(|&t| t > 0).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let start = Instant::now();
-    let (workers, local_scene, mut opts) = match plan {
-        Some((w, o)) => (w, None, o),
-        None => {
-            // The embedded worker: prepare the optics here.
-            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-            let cache = MieCache::from_env();
-            let steps = Scene::steps(&atm, &settings);
-            let prep = ProgressBar::new(steps as u64);
-            prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
-            let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
-            prep.finish_and_clear();
-            (vec![WorkerSpec::Local { threads }], Some(Arc::new(scene)), Options::default())
-        }
+    // The optics are prepared here once; a farm job carries them, so every
+    // worker renders with the same numbers whatever its maths library.
+    let scene = {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+        let cache = MieCache::from_env();
+        let steps = Scene::steps(&atm, &settings);
+        let prep = ProgressBar::new(steps as u64);
+        prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
+        let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
+        prep.finish_and_clear();
+        Arc::new(scene)
+    };
+    let (workers, mut opts) = match plan {
+        Some((w, o)) => (w, o),
+        None => (vec![WorkerSpec::Local { threads }], Options::default()),
     };
     if let Some(v) = a.verify_fraction {
         opts.verify_fraction = v;
@@ -347,7 +349,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     opts.progress = if a.json_progress { ProgressMode::Json } else { ProgressMode::Bars };
     opts.fault_kill_after_columns = a.fault_kill_after_columns;
     let prep_s = start.elapsed().as_secs_f64();
-    let message = job::make(&bundle, &settings);
+    let message = job::make(&bundle, &settings, Some(&scene));
     let job = Arc::new(FarmJob { hash: job::hash(&message), message, settings: settings.clone() });
     // The journal next to the output: every accepted column, synced.
     let (journal, resumed) = match &a.out {
@@ -374,7 +376,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let journal_path = journal.as_ref().map(|j| j.path().to_path_buf());
     let t0 = Instant::now();
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
-    let outcome = rt.block_on(coordinator::run(job.clone(), workers, local_scene, resumed, journal, opts, cancel.clone()));
+    let outcome = rt.block_on(coordinator::run(job.clone(), workers, Some(scene), resumed, journal, opts, cancel.clone()));
     rt.shutdown_background();
     let outcome = match outcome {
         Ok(o) => o,

@@ -11,8 +11,10 @@
 //! - Every tile is checked (job hash, columns, size, finite non-negative
 //!   values) before it is accepted, and accepted columns go to the journal.
 //! - `verify_fraction` of the columns are rendered again on a different
-//!   worker and compared bit for bit; a mismatch quarantines the first
-//!   worker and re-renders every column it produced.
+//!   worker and compared bit for bit; on a mismatch a third worker decides,
+//!   and the one that disagrees with the other two is quarantined and every
+//!   column it produced rendered again (with no third worker, the second
+//!   is trusted over the first).
 //! - Thresholds (the defaults farm managers ship): a column that fails on
 //!   3 different workers fails the render with a report; a worker that
 //!   fails 3 tasks, or refuses the job (versions, token), is quarantined.
@@ -160,7 +162,20 @@ pub struct Outcome {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Kind {
     Render,
-    Verify { producer: usize },
+    /// A second (or third) rendering of a column: an entry of `checks`.
+    Verify { check: u64 },
+}
+
+/// A column to render again on another worker and compare bit for bit.
+#[derive(Debug, Clone)]
+struct Check {
+    column: u32,
+    producer: usize,
+    /// Workers that may not take it (the producer, a disputing verifier).
+    excluded: Vec<usize>,
+    /// A verifier whose result differed from the producer's, and its
+    /// result: a third worker decides which of the two is wrong.
+    disputed: Option<(usize, Vec<PixelResult>)>,
 }
 
 struct Task {
@@ -222,7 +237,9 @@ struct Sched {
     producer: Vec<Option<usize>>,
     pending: BTreeSet<u32>,
     tasks: BTreeMap<u64, Task>,
-    verify_queue: VecDeque<(u32, usize)>,
+    verify_queue: VecDeque<u64>,
+    checks: BTreeMap<u64, Check>,
+    next_check: u64,
     column_failures: HashMap<u32, BTreeMap<usize, String>>,
     workers: Vec<WState>,
     next_id: u64,
@@ -277,14 +294,33 @@ impl Sched {
         // Verifications no live worker but the producer could take are dropped.
         let live: Vec<usize> = (0..self.workers.len()).filter(|&i| self.workers[i].quarantined.is_none()).collect();
         let before = self.verify_queue.len();
-        self.verify_queue.retain(|&(_, p)| live.iter().any(|&i| i != p));
+        let checks = &self.checks;
+        let mut unresolved = Vec::new();
+        self.verify_queue.retain(|id| {
+            let c = &checks[id];
+            let ok = live.iter().any(|i| !c.excluded.contains(i));
+            if !ok {
+                unresolved.push(*id);
+            }
+            ok
+        });
         self.stats.columns_unverified += (before - self.verify_queue.len()) as u32;
+        for id in unresolved {
+            // A dispute no third worker can settle: trust the verifier over
+            // the producer (the column is rendered again by someone else).
+            let c = self.checks.remove(&id).unwrap();
+            if let Some((v, _)) = c.disputed {
+                let why = format!("column {} differed bit for bit from {}'s, and no third worker could decide", c.column, self.workers[v].name);
+                self.convict(c.producer, why);
+            }
+        }
         if self.complete() {
             return Assign::Done;
         }
-        if let Some(pos) = self.verify_queue.iter().position(|&(_, p)| p != w) {
-            let (c, producer) = self.verify_queue.remove(pos).unwrap();
-            return self.new_task(w, c, 1, Kind::Verify { producer });
+        if let Some(pos) = self.verify_queue.iter().position(|id| !self.checks[id].excluded.contains(&w)) {
+            let id = self.verify_queue.remove(pos).unwrap();
+            let column = self.checks[&id].column;
+            return self.new_task(w, column, 1, Kind::Verify { check: id });
         }
         if let Some(&start) = self.pending.iter().next() {
             let n = self.batch(w);
@@ -362,7 +398,7 @@ impl Sched {
                     self.producer[c as usize] = Some(w);
                     self.stats.columns_rendered += 1;
                     if self.picked_for_verification(c) {
-                        self.verify_queue.push_back((c, w));
+                        self.add_check(Check { column: c, producer: w, excluded: vec![w], disputed: None }, false);
                     }
                 }
                 if let Some(j) = &mut self.journal {
@@ -381,35 +417,79 @@ impl Sched {
                     }
                 }
             }
-            Kind::Verify { producer } => {
-                let c = task.first;
-                let same = match (&self.columns[c as usize], columns.first()) {
-                    (Some(a), Some(b)) => bitwise_equal(a, b),
-                    _ => false,
-                };
-                if same {
-                    self.stats.columns_verified += 1;
-                } else if self.producer[c as usize] == Some(producer) {
-                    self.stats.verify_mismatches += 1;
-                    let why = format!("column {c} differed bit for bit when {} rendered it again", self.workers[w].name);
-                    self.quarantine(producer, why);
-                    // Everything it produced is rendered again.
-                    let mine: Vec<u32> = (0..self.width).filter(|&i| self.producer[i as usize] == Some(producer)).collect();
-                    for i in mine {
-                        self.columns[i as usize] = None;
-                        self.producer[i as usize] = None;
-                        self.pending.insert(i);
-                        self.stats.columns_rendered -= 1;
-                        if let Some(j) = &mut self.journal {
-                            if let Err(e) = j.retract(i) {
-                                self.fatal = Some(e.into());
-                            }
+            Kind::Verify { check } => {
+                let Some(chk) = self.checks.remove(&check) else { return };
+                let c = chk.column;
+                // The producer may have been caught meanwhile (its columns
+                // are being rendered again): nothing left to check.
+                if self.producer[c as usize] != Some(chk.producer) {
+                    return;
+                }
+                let Some(mine) = columns.into_iter().next() else { return };
+                let stored = self.columns[c as usize].clone().expect("a produced column");
+                match chk.disputed {
+                    None if bitwise_equal(&stored, &mine) => self.stats.columns_verified += 1,
+                    None => {
+                        self.stats.verify_mismatches += 1;
+                        let third = (0..self.workers.len()).any(|i| self.workers[i].quarantined.is_none() && i != chk.producer && i != w);
+                        if third {
+                            // Two opinions differ: a third worker decides.
+                            self.add_check(Check { column: c, producer: chk.producer, excluded: vec![chk.producer, w], disputed: Some((w, mine)) }, true);
+                        } else {
+                            let why = format!("column {c} differed bit for bit when {} rendered it again (no third worker to decide)", self.workers[w].name);
+                            self.convict(chk.producer, why);
                         }
                     }
-                    self.verify_queue.retain(|&(_, p)| p != producer);
+                    Some((v, theirs)) => {
+                        let name = self.workers[w].name.clone();
+                        if bitwise_equal(&stored, &mine) {
+                            self.stats.columns_verified += 1;
+                            let why = format!("its rendering of column {c} differed bit for bit from those of {} and {name}", self.workers[chk.producer].name);
+                            self.convict(v, why);
+                        } else if bitwise_equal(&theirs, &mine) {
+                            let why = format!("its column {c} differed bit for bit from those of {} and {name}", self.workers[v].name);
+                            self.convict(chk.producer, why);
+                        } else {
+                            let why = format!("three different renderings of column {c} ({name} was the third)");
+                            self.convict(chk.producer, why.clone());
+                            self.convict(v, why);
+                        }
+                    }
                 }
             }
         }
+    }
+
+    fn add_check(&mut self, c: Check, urgent: bool) {
+        let id = self.next_check;
+        self.next_check += 1;
+        self.checks.insert(id, c);
+        if urgent {
+            self.verify_queue.push_front(id);
+        } else {
+            self.verify_queue.push_back(id);
+        }
+    }
+
+    /// Quarantines a worker caught with a wrong result and renders again
+    /// every column it produced.
+    fn convict(&mut self, w: usize, why: String) {
+        self.quarantine(w, why);
+        let mine: Vec<u32> = (0..self.width).filter(|&i| self.producer[i as usize] == Some(w)).collect();
+        for i in mine {
+            self.columns[i as usize] = None;
+            self.producer[i as usize] = None;
+            self.pending.insert(i);
+            self.stats.columns_rendered -= 1;
+            if let Some(j) = &mut self.journal {
+                if let Err(e) = j.retract(i) {
+                    self.fatal = Some(e.into());
+                }
+            }
+        }
+        let checks = &self.checks;
+        self.verify_queue.retain(|id| checks[id].producer != w);
+        self.checks.retain(|_, c| c.producer != w);
     }
 
     /// Takes worker `w` off task `id`; the last runner to leave puts the
@@ -429,7 +509,11 @@ impl Sched {
                     }
                 }
             }
-            Kind::Verify { producer } => self.verify_queue.push_front((task.first, producer)),
+            Kind::Verify { check } => {
+                if self.checks.contains_key(&check) {
+                    self.verify_queue.push_front(check);
+                }
+            }
         }
         if !cancelled {
             self.stats.requeued += 1;
@@ -555,6 +639,8 @@ pub async fn run(
             pending,
             tasks: BTreeMap::new(),
             verify_queue: VecDeque::new(),
+            checks: BTreeMap::new(),
+            next_check: 1,
             column_failures: HashMap::new(),
             workers: wstates,
             next_id: 1,

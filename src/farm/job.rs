@@ -4,7 +4,7 @@
 
 use super::proto;
 use crate::atmosphere::{Atmosphere, Bundle};
-use crate::render::Settings;
+use crate::render::{Scene, Settings};
 use prost::Message;
 
 #[derive(Debug, thiserror::Error)]
@@ -17,11 +17,13 @@ pub enum JobError {
     Settings(String),
     #[error("job's atmosphere: {0}")]
     Atmosphere(String),
+    #[error("job's prepared optics do not decode: {0}")]
+    Scene(String),
 }
 
 /// Builds the job message (data files sorted by name, so equal jobs encode
-/// equally).
-pub fn make(bundle: &Bundle, settings: &Settings) -> proto::Job {
+/// equally), with the prepared optics when given.
+pub fn make(bundle: &Bundle, settings: &Settings, scene: Option<&Scene>) -> proto::Job {
     proto::Job {
         protocol_version: super::PROTOCOL_VERSION,
         build_version: super::build_version(),
@@ -29,7 +31,16 @@ pub fn make(bundle: &Bundle, settings: &Settings) -> proto::Job {
         atmosphere_toml: bundle.text.clone(),
         files: bundle.files.iter().map(|(name, content)| proto::DataFile { name: name.clone(), content: content.clone() }).collect(),
         settings_json: serde_json::to_string(settings).expect("settings serialise"),
+        scene: scene.map(|s| postcard::to_stdvec(s).expect("scenes serialise")).unwrap_or_default(),
     }
+}
+
+/// The job's prepared optics, if it carries them.
+pub fn scene(job: &proto::Job) -> Result<Option<Scene>, JobError> {
+    if job.scene.is_empty() {
+        return Ok(None);
+    }
+    postcard::from_bytes(&job.scene).map(Some).map_err(|e| JobError::Scene(e.to_string()))
 }
 
 /// The job's hash, hex.
@@ -71,8 +82,9 @@ mod tests {
         assert!(bundle.files.len() >= 3, "{:?}", bundle.files.keys());
         let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
         s.camera = Camera::Fisheye;
-        let job = make(&bundle, &s);
-        assert_eq!(hash(&job), hash(&make(&bundle, &s)));
+        let job = make(&bundle, &s, None);
+        assert_eq!(hash(&job), hash(&make(&bundle, &s, None)));
+        assert!(scene(&job).unwrap().is_none());
         let (atm2, s2) = open(&job).unwrap();
         assert_eq!(atm2.content_hash, atm.content_hash);
         assert_eq!(s2, s);
@@ -84,5 +96,21 @@ mod tests {
         let mut old = job.clone();
         old.build_version = "0.0.1".into();
         assert!(matches!(open(&old), Err(JobError::Build { .. })));
+    }
+
+    #[test]
+    fn prepared_optics_travel_bit_for_bit() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/analytic-hg.toml");
+        let (atm, bundle) = Atmosphere::load_bundle(&path).unwrap();
+        let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
+        s.xyz = true;
+        s.band_nm = 20.0;
+        let scene = Scene::new(&atm, &s, &crate::mie::MieCache::new(None), &|| {});
+        let job = make(&bundle, &s, Some(&scene));
+        let back = super::scene(&job).unwrap().expect("carried");
+        assert_eq!(postcard::to_stdvec(&back).unwrap(), job.scene);
+        let mut broken = job.clone();
+        broken.scene.truncate(100);
+        assert!(matches!(super::scene(&broken), Err(JobError::Scene(_))));
     }
 }

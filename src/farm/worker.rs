@@ -311,7 +311,10 @@ async fn run_task(
             let shared = s.clone();
             let work = tokio::task::spawn_blocking(move || -> Result<Arc<(Scene, Settings)>, Status> {
                 let (atm, settings) = job::open(&j).map_err(|e| Status::invalid_argument(e.to_string()))?;
-                let scene = shared.pool.install(|| Scene::new(&atm, &settings, &shared.config.cache, &|| {}));
+                let scene = match job::scene(&j).map_err(|e| Status::invalid_argument(e.to_string()))? {
+                    Some(s) => s,
+                    None => shared.pool.install(|| Scene::new(&atm, &settings, &shared.config.cache, &|| {})),
+                };
                 Ok(Arc::new((scene, settings)))
             });
             let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true)).await? {

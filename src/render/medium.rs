@@ -25,7 +25,7 @@ fn shell_edges(top_km: f64) -> Vec<f64> {
 }
 
 /// What scatters or absorbs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum ComponentKind {
     Rayleigh,
     Absorber,
@@ -33,7 +33,7 @@ pub enum ComponentKind {
 }
 
 /// The wavelength-independent part: geometry and density rasters.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Medium {
     pub geometry: Geometry,
     pub radius_km: f64,
@@ -49,7 +49,7 @@ pub struct Medium {
 }
 
 /// A phase function at one wavelength.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub enum Phase {
     /// No scattering (a pure absorber).
     None,
@@ -73,7 +73,7 @@ impl Phase {
 }
 
 /// The optics of every component at one wavelength.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Spectral {
     pub wavelength_nm: f64,
     /// Extinction coefficient per unit of the component's profile, km⁻¹.
@@ -217,7 +217,7 @@ impl Spectral {
 /// integrated by the trapezoid rule on steps of 0.2 % of the altitude plus
 /// 10 m, and interpolated bilinearly; rays that meet the ground are marked
 /// by an infinite column.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct ColumnTable {
     z_km: Vec<f64>,
     theta_steps: usize,

@@ -111,7 +111,7 @@ impl Settings {
 }
 
 /// The visible range split into bands, with their colour weights.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct Bands {
     pub centre_nm: Vec<f64>,
     /// W_b: 683 Σ E(λ) cmf(λ) over the band's 1 nm samples.
@@ -171,7 +171,10 @@ impl Bands {
     }
 }
 
-/// The prepared scene: medium, per-band and per-line optics.
+/// The prepared scene: medium, per-band and per-line optics. It travels in
+/// farm jobs (postcard-encoded), so every worker renders with the very same
+/// numbers whatever its platform's maths library.
+#[derive(serde::Serialize, serde::Deserialize)]
 pub struct Scene {
     pub medium: Medium,
     /// For hero sampling: the shared majorant of the set whose hero is band b.
