@@ -303,3 +303,98 @@ fn a_paused_worker_gives_its_work_back() {
     assert_eq!(wb["tasks_done"], 0, "{s}");
     assert!(wb["state"].as_str().unwrap().contains("paused"), "{s}");
 }
+
+#[test]
+fn workers_speak_tls_when_given_a_certificate() {
+    let mut farm = Farm::new();
+    let local = farm.local("local.exr");
+    // A CA and a worker certificate for "sky-farm-test".
+    let ca_key = rcgen::KeyPair::generate().unwrap();
+    let mut ca_params = rcgen::CertificateParams::new(Vec::<String>::new()).unwrap();
+    ca_params.is_ca = rcgen::IsCa::Ca(rcgen::BasicConstraints::Unconstrained);
+    let ca = ca_params.self_signed(&ca_key).unwrap();
+    let key = rcgen::KeyPair::generate().unwrap();
+    let issuer = rcgen::Issuer::from_params(&ca_params, &ca_key);
+    let cert = rcgen::CertificateParams::new(vec!["sky-farm-test".to_string()]).unwrap().signed_by(&key, &issuer).unwrap();
+    std::fs::write(farm.path("ca.pem"), ca.pem()).unwrap();
+    std::fs::write(farm.path("cert.pem"), cert.pem()).unwrap();
+    std::fs::write(farm.path("key.pem"), key.serialize_pem()).unwrap();
+    let (c, k) = (farm.path("cert.pem"), farm.path("key.pem"));
+    farm.start("tls", &["--tls-cert", c.to_str().unwrap(), "--tls-key", k.to_str().unwrap()]);
+    // A farm file with the CA and the name in the certificate.
+    let farm_toml = format!(
+        "token_file = \"token\"\n[tls]\nca = \"ca.pem\"\ndomain = \"sky-farm-test\"\n[[worker]]\nname = \"tls\"\naddress = \"{}\"\n",
+        farm.workers[0].addr
+    );
+    std::fs::write(farm.path("farm.toml"), farm_toml).unwrap();
+    let mut args = render_args(&farm.path("farm.exr"));
+    args.extend(["--farm".to_string(), farm.path("farm.toml").to_str().unwrap().to_string()]);
+    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(same_file(&local, &farm.path("farm.exr")));
+    // Plain text to a TLS worker fails clearly, and the worker keeps serving.
+    let o = farm.render("plain.exr", &[0], &[]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(!farm.path("plain.exr").exists());
+    assert!(farm.alive(0));
+}
+
+#[test]
+fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
+    use proto::render_event::Event;
+    use proto::{ControlAction, ControlRequest, WorkerState};
+    let mut farm = Farm::new();
+    let w = farm.start("w", &[]);
+    // A long task: four directions at a million samples each.
+    let (_, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/analytic-hg.toml")).unwrap();
+    let mut settings = sky::render::Settings::directions(vec![(60.0, 0.0), (70.0, 90.0), (80.0, 180.0), (85.0, 0.0)], 60.0, vec![], 1_000_000, 1, false);
+    settings.xyz = true;
+    let job = sky::farm::job::make(&bundle, &settings, None);
+    let hash = sky::farm::job::hash(&job);
+    let task = |id: u64, job: Option<proto::Job>| proto::RenderTask {
+        protocol_version: sky::farm::PROTOCOL_VERSION,
+        build_version: sky::farm::build_version(),
+        job_hash: hash.clone(),
+        job,
+        task_id: id,
+        first_column: 0,
+        columns: 4,
+    };
+    let uri = format!("http://{}", farm.workers[w].addr);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let mut stream = c.render(task(1, Some(job.clone()))).await.unwrap().into_inner();
+        // Wait until it renders (past preparing the optics).
+        loop {
+            match stream.message().await.unwrap().unwrap().event {
+                Some(Event::Heartbeat(h)) if !h.preparing => break,
+                Some(Event::Tile(_)) => panic!("the task finished too soon to be paused"),
+                _ => {}
+            }
+        }
+        let r = c.control(ControlRequest { action: ControlAction::Pause as i32 }).await.unwrap().into_inner();
+        assert_eq!(r.state, WorkerState::Paused as i32);
+        assert_eq!(r.paused_reason, "rpc");
+        // The running task comes back at once as "paused"...
+        let e = loop {
+            match stream.message().await {
+                Err(e) => break e,
+                Ok(Some(ev)) => assert!(!matches!(ev.event, Some(Event::Tile(_))), "a paused worker finished its task"),
+                Ok(None) => panic!("the stream ended without saying why"),
+            }
+        };
+        assert_eq!(e.code(), tonic::Code::Unavailable);
+        assert!(e.message().starts_with("paused"), "{e}");
+        // ...and new tasks are refused while paused.
+        let e = c.render(task(2, None)).await.err().expect("refused while paused");
+        assert_eq!(e.code(), tonic::Code::Unavailable);
+        assert!(e.message().contains("paused (rpc)"), "{e}");
+        let r = c.control(ControlRequest { action: ControlAction::Resume as i32 }).await.unwrap().into_inner();
+        assert_eq!(r.state, WorkerState::Idle as i32);
+        // Resumed, it takes the job again (it kept the prepared optics).
+        let mut stream = c.render(task(3, None)).await.unwrap().into_inner();
+        let first = stream.message().await.unwrap().unwrap();
+        assert!(matches!(first.event, Some(Event::Heartbeat(_))));
+    });
+}

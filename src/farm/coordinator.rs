@@ -141,6 +141,8 @@ pub struct Stats {
     pub columns_resumed: u32,
     /// Columns accepted from workers in this run (each counted once).
     pub columns_rendered: u32,
+    /// Path samples in those columns (each pixel's count, summed).
+    pub samples_rendered: u64,
     pub tasks: u64,
     /// Tasks started a second time on an idle worker.
     pub duplicates: u64,
@@ -394,6 +396,7 @@ impl Sched {
                         continue;
                     }
                     accepted.push(tile::encode(&self.job_hash, 0, c, self.height, self.lines as usize, std::slice::from_ref(&col)));
+                    self.stats.samples_rendered += col.iter().map(|p| p.samples as u64).sum::<u64>();
                     self.columns[c as usize] = Some(col);
                     self.producer[c as usize] = Some(w);
                     self.stats.columns_rendered += 1;
@@ -1023,6 +1026,7 @@ async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u6
             ProgressMode::Json => {
                 let v = serde_json::json!({
                     "event": "progress",
+                    "samples_per_s": stats.samples_rendered as f64 / started.elapsed().as_secs_f64().max(1e-3),
                     "elapsed_s": started.elapsed().as_secs_f64(),
                     "pixels_done": pixels,
                     "pixels_total": total_pixels,
@@ -1036,8 +1040,9 @@ async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u6
             _ => {
                 if let Some(main) = &main {
                     main.set_position(pixels);
+                    let rate = stats.samples_rendered as f64 / started.elapsed().as_secs_f64().max(1e-3);
                     main.set_message(match eta {
-                        Some(e) => format!("ETA {}", fmt_duration(e)),
+                        Some(e) => format!("{} samples/s  ETA {}", fmt_rate(rate), fmt_duration(e)),
                         None => "ETA …".into(),
                     });
                 }
@@ -1048,6 +1053,16 @@ async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u6
             }
         }
         let _ = &multi;
+    }
+}
+
+fn fmt_rate(r: f64) -> String {
+    if r >= 1e6 {
+        format!("{:.1}M", r / 1e6)
+    } else if r >= 1e3 {
+        format!("{:.0}k", r / 1e3)
+    } else {
+        format!("{r:.0}")
     }
 }
 
