@@ -210,6 +210,54 @@ fn ctrl_c_stops_a_render_and_writes_nothing() {
     let status = child.wait().unwrap();
     assert_eq!(status.code(), Some(130));
     assert!(!out.exists());
+    // The journal stays, for --resume.
+    assert!(c.path().join("big.exr.journal").exists());
     let leftovers: Vec<_> = std::fs::read_dir(c.path()).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().starts_with(".tmp")).collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn farm_flags_and_files_are_checked() {
+    let c = tempfile::tempdir().unwrap();
+    let out = c.path().join("sky.exr");
+    let out_s = out.to_str().unwrap();
+    let base = ["render", "atmospheres/analytic-hg.toml", "--sun-zenith-deg", "60", "--size", "4x4", "--spp", "2", "--out", out_s];
+    // A worker without a token refuses to start, naming the ways to give one.
+    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(["worker", "--listen", "127.0.0.1:0"]).env_remove("SKY_FARM_TOKEN").output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("--token-file"), "{}", text(&o).1);
+    let o = sky(&["worker", "--listen", "not-an-address", "--token-file", "x"], c.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("--listen not-an-address"), "{}", text(&o).1);
+    // A farm render without a token.
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(["--workers", "127.0.0.1:9"]);
+    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(&args).current_dir(root()).env_remove("SKY_FARM_TOKEN").output().unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("token"), "{}", text(&o).1);
+    // A broken farm file: the error names the file and the line.
+    let farm = c.path().join("farm.toml");
+    std::fs::write(&farm, "token_file = \"t\"\n[[worker]]\naddress = \"a:1\"\nthreads = 4\n").unwrap();
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(["--farm", farm.to_str().unwrap()]);
+    let o = sky(&args, c.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o).1;
+    assert!(err.contains("farm.toml") && err.contains("line 4") && err.contains("threads"), "{err}");
+    // --resume needs --out; --verify-fraction is a fraction.
+    let o = sky(&["render", "atmospheres/analytic-hg.toml", "--sun-zenith-deg", "60", "--json", "--resume"], c.path());
+    assert_eq!(o.status.code(), Some(2));
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(["--verify-fraction", "1.5"]);
+    let o = sky(&args, c.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("--verify-fraction"), "{}", text(&o).1);
+    // An unreachable worker fails the render clearly and writes nothing.
+    let mut args: Vec<&str> = base.to_vec();
+    args.extend(["--workers", "127.0.0.1:9", "--lease-s", "1"]);
+    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(&args).current_dir(root()).env("SKY_FARM_TOKEN", "t").env("SKY_CACHE_DIR", c.path()).output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o).1;
+    assert!(err.contains("no worker left") && err.contains("127.0.0.1:9"), "{err}");
+    assert!(!out.exists());
 }
