@@ -148,7 +148,7 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     farm.start("killed", &["--fault-sigkill-on-task", "0"]);
     farm.start("stalled", &["--fault-stall-after", "0"]);
     farm.start("garbage", &["--fault-corrupt"]);
-    let o = farm.render("farm.exr", &[0, 1, 2, 3], &["--json-progress", "--lease-s", "3"]);
+    let o = farm.render("farm.exr", &[0, 1, 2, 3], &["--json-progress", "--lease-s", "5"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")), "the result changed");
     assert!(!farm.alive(1), "the killed worker should be dead");
@@ -397,4 +397,60 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
         let first = stream.message().await.unwrap().unwrap();
         assert!(matches!(first.event, Some(Event::Heartbeat(_))));
     });
+}
+
+/// The owner comes first: outside its schedule a worker is paused from the
+/// start, and while other programs keep the CPU busy it pauses itself.
+#[test]
+fn schedule_and_owner_load_pause_a_worker() {
+    use proto::WorkerState;
+    // A window that starts two hours from now (local time): not now.
+    let now_min = unsafe {
+        let t = libc::time(std::ptr::null_mut());
+        let mut tm: libc::tm = std::mem::zeroed();
+        libc::localtime_r(&t, &mut tm);
+        (tm.tm_hour * 60 + tm.tm_min) as u32
+    };
+    let (a, b) = ((now_min + 120) % 1440, (now_min + 180) % 1440);
+    let window = format!("{:02}:{:02}-{:02}:{:02}", a / 60, a % 60, b / 60, b % 60);
+    let mut farm = Farm::new();
+    let off_hours = farm.start("off-hours", &["--schedule", &window]);
+    // The load policy: the token test workers turn it off; this one keeps it.
+    let mut child = Command::new(SKY)
+        .args(["worker", "--listen", "127.0.0.1:0", "--threads", "1", "--nice", "0", "--owner-load-limit", "0.3", "--name", "polite"])
+        .arg("--token-file")
+        .arg(farm.path("token"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+    let polite_addr = line.trim().strip_prefix("listening on ").unwrap().to_string();
+    farm.workers.push(Worker { child, addr: polite_addr.clone() });
+    // The owner's programs: one busy loop per core.
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(2);
+    let mut hogs: Vec<Child> = (0..cores).map(|_| Command::new("sh").args(["-c", "while :; do :; done"]).spawn().unwrap()).collect();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let hello = || proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+    let result = rt.block_on(async {
+        let mut c = connect(&format!("http://{}", farm.workers[off_hours].addr), Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let r = c.hello(hello()).await.unwrap().into_inner();
+        assert_eq!((r.state, r.paused_reason.as_str()), (WorkerState::Paused as i32, "schedule"), "window {window}");
+        // The load policy samples every 5 s and pauses after two busy samples.
+        let mut c = connect(&format!("http://{polite_addr}"), Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        for _ in 0..60 {
+            let r = c.hello(hello()).await.unwrap().into_inner();
+            if r.state == WorkerState::Paused as i32 {
+                return Ok(r.paused_reason);
+            }
+            tokio::time::sleep(Duration::from_millis(500)).await;
+        }
+        Err("the worker never paused under load")
+    });
+    for h in &mut hogs {
+        let _ = h.kill();
+        let _ = h.wait();
+    }
+    assert_eq!(result, Ok("load".to_string()));
 }
