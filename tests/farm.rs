@@ -134,6 +134,10 @@ fn three_workers_render_bit_identically_to_a_local_render() {
     assert!(s["farm"]["tasks"].as_u64().unwrap() >= 3, "{s}");
     let workers = s["farm"]["workers"].as_array().unwrap();
     assert_eq!(workers.len(), 3);
+    // Unnamed on the command line, each worker goes by its own --name.
+    let mut names: Vec<&str> = workers.iter().map(|w| w["name"].as_str().unwrap()).collect();
+    names.sort();
+    assert_eq!(names, ["a", "b", "c"], "{s}");
     assert!(workers.iter().all(|w| w["quarantined"].is_null()), "{s}");
     let columns: u64 = workers.iter().map(|w| w["columns_done"].as_u64().unwrap()).sum();
     assert!(columns >= 32, "{s}");
@@ -155,14 +159,14 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     let s = summary(&o);
     let workers = s["farm"]["workers"].as_array().unwrap();
     // The garbage worker's tiles were refused every time: quarantined.
-    let g = workers.iter().find(|w| w["name"] == farm.workers[3].addr).unwrap().clone();
+    let g = workers.iter().find(|w| w["address"] == farm.workers[3].addr).unwrap().clone();
     assert!(g["quarantined"].is_string(), "{g}");
     assert_eq!(g["columns_done"], 0, "{g}");
     assert!(s["farm"]["requeued"].as_u64().unwrap() >= 3, "{s}");
     assert!(stderr(&o).contains("invalid result: tile value 0 is NaN"), "{}", stderr(&o));
     // The stalled worker never delivered; its task was re-queued after the
     // lease or duplicated and won elsewhere.
-    let st = workers.iter().find(|w| w["name"] == farm.workers[2].addr).unwrap();
+    let st = workers.iter().find(|w| w["address"] == farm.workers[2].addr).unwrap();
     assert_eq!(st["tasks_done"], 0, "{s}");
 }
 
@@ -202,7 +206,7 @@ fn verification_catches_a_worker_with_wrong_results() {
     assert!(same_file(&local, &farm.path("farm.exr")), "a wrong result got through");
     let s = summary(&o);
     let workers = s["farm"]["workers"].as_array().unwrap();
-    let liar = workers.iter().find(|w| w["name"] == farm.workers[2].addr).unwrap();
+    let liar = workers.iter().find(|w| w["address"] == farm.workers[2].addr).unwrap();
     // Whatever the liar touched (its own columns, or columns it was asked
     // to verify) came out as a mismatch, and a third opinion convicted it;
     // the honest workers were never blamed.
@@ -299,7 +303,7 @@ fn a_paused_worker_gives_its_work_back() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")));
     let s = summary(&o);
-    let wb = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["name"] == farm.workers[b].addr).unwrap().clone();
+    let wb = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["address"] == farm.workers[b].addr).unwrap().clone();
     assert_eq!(wb["tasks_done"], 0, "{s}");
     assert!(wb["state"].as_str().unwrap().contains("paused"), "{s}");
 }

@@ -374,7 +374,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let big = spawn_worker(threads, &token, "bench-all-cores")?;
             let one_a = spawn_worker(1, &token, "bench-1a")?;
             let one_b = spawn_worker(1, &token, "bench-1b")?;
-            let remote = |w: &BenchWorker| WorkerSpec::Remote { name: w.uri.clone(), uri: w.uri.clone() };
+            let remote = |w: &BenchWorker| WorkerSpec::Remote { name: None, uri: w.uri.clone() };
             for wk in [&big, &one_a, &one_b] {
                 farm_seconds(&rt, &job, vec![remote(wk)], None, &token)?;
             }

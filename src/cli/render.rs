@@ -199,7 +199,7 @@ fn farm_plan(a: &RenderArgs) -> Result<Option<(Vec<WorkerSpec>, Options)>> {
         .into_iter()
         .map(|(name, address)| {
             let uri = config::worker_uri(&address, ca.is_some());
-            WorkerSpec::Remote { name: name.unwrap_or_else(|| address.clone()), uri }
+            WorkerSpec::Remote { name, uri }
         })
         .collect();
     Ok(Some((workers, opts)))

@@ -39,17 +39,29 @@ use tonic::transport::{Channel, ClientTlsConfig, Endpoint};
 pub enum WorkerSpec {
     /// The embedded worker: this process's cores.
     Local { threads: usize },
-    /// A `sky worker` daemon at `uri` (http://host:port or https://…).
-    Remote { name: String, uri: String },
+    /// A `sky worker` daemon at `uri` (http://host:port or https://…),
+    /// named by the farm file, or (None) by the worker itself.
+    Remote { name: Option<String>, uri: String },
 }
 
 impl WorkerSpec {
     pub fn name(&self) -> String {
         match self {
             WorkerSpec::Local { .. } => "local".into(),
-            WorkerSpec::Remote { name, .. } => name.clone(),
+            WorkerSpec::Remote { name, uri } => name.clone().unwrap_or_else(|| address_of(uri)),
         }
     }
+
+    pub fn address(&self) -> String {
+        match self {
+            WorkerSpec::Local { .. } => "local".into(),
+            WorkerSpec::Remote { uri, .. } => address_of(uri),
+        }
+    }
+}
+
+fn address_of(uri: &str) -> String {
+    uri.trim_start_matches("http://").trim_start_matches("https://").trim_end_matches('/').to_string()
 }
 
 /// How progress is shown.
@@ -125,6 +137,8 @@ pub enum FarmError {
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct WorkerStats {
     pub name: String,
+    /// HOST:PORT, or "local" for the embedded worker.
+    pub address: String,
     pub state: String,
     pub tasks_done: u64,
     pub columns_done: u64,
@@ -217,6 +231,7 @@ enum TaskError {
 
 struct WState {
     name: String,
+    address: String,
     state: String,
     failures: usize,
     tasks_done: u64,
@@ -558,6 +573,7 @@ impl Sched {
             .iter()
             .map(|w| WorkerStats {
                 name: w.name.clone(),
+                address: w.address.clone(),
                 state: if w.state == "rendering" && w.preparing.load(Ordering::Relaxed) { "preparing job".into() } else { w.state.clone() },
                 tasks_done: w.tasks_done,
                 columns_done: w.columns_done,
@@ -621,6 +637,7 @@ pub async fn run(
         .iter()
         .map(|w| WState {
             name: w.name(),
+            address: w.address(),
             state: "connecting".into(),
             failures: 0,
             tasks_done: 0,
@@ -683,6 +700,7 @@ pub async fn run(
 
 /// One worker's loop: take a task, run it, report, until the job is done.
 async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options, local_scene: Option<Arc<Scene>>) {
+    let mut named = true;
     let mut backend = match spec {
         WorkerSpec::Local { threads } => {
             let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
@@ -700,7 +718,10 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
             };
             Backend::Local { pool, scene }
         }
-        WorkerSpec::Remote { uri, .. } => Backend::Remote { uri, client: None, has_job: false },
+        WorkerSpec::Remote { uri, name } => {
+            named = name.is_some();
+            Backend::Remote { uri, client: None, has_job: false, hello_name: None }
+        }
     };
     let (inflight, preparing) = {
         let s = shared.sched.lock().unwrap();
@@ -712,7 +733,12 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
             break;
         }
         // Be connected, agree on versions and not be paused before taking work.
-        match backend.ready(&opts).await {
+        let ready = backend.ready(&opts).await;
+        if let (false, Backend::Remote { hello_name: Some(n), .. }) = (named, &backend) {
+            // Unnamed in the farm file: the worker's own --name.
+            shared.sched.lock().unwrap().workers[w].name = n.clone();
+        }
+        match ready {
             Ok(None) => backoff = Duration::from_millis(500),
             Ok(Some(reason)) => {
                 shared.sched.lock().unwrap().workers[w].state = format!("paused ({reason})");
@@ -795,7 +821,7 @@ async fn wait_or_done(shared: &Shared, w: usize, d: Duration) -> bool {
 
 enum Backend {
     Local { pool: Arc<rayon::ThreadPool>, scene: Arc<Scene> },
-    Remote { uri: String, client: Option<Client>, has_job: bool },
+    Remote { uri: String, client: Option<Client>, has_job: bool, hello_name: Option<String> },
 }
 
 type Client = WorkerClient<tonic::service::interceptor::InterceptedService<Channel, Auth>>;
@@ -854,7 +880,7 @@ fn classify(status: &tonic::Status) -> TaskError {
 impl Backend {
     /// Ok(None) when ready, Ok(Some(reason)) when paused.
     async fn ready(&mut self, opts: &Options) -> Result<Option<String>, TaskError> {
-        let Backend::Remote { uri, client, has_job } = self else { return Ok(None) };
+        let Backend::Remote { uri, client, has_job, hello_name } = self else { return Ok(None) };
         if client.is_none() {
             let c = connect(uri, opts.token.as_deref(), opts.tls.clone(), Duration::from_secs(5)).await.map_err(TaskError::Failed)?;
             *client = Some(c);
@@ -876,6 +902,7 @@ impl Backend {
             }
             Ok(Ok(r)) => r.into_inner(),
         };
+        *hello_name = Some(reply.name.clone());
         if reply.protocol_version != PROTOCOL_VERSION {
             return Err(TaskError::Refused(format!("worker {} at {uri} speaks farm protocol {}, this coordinator {PROTOCOL_VERSION}", reply.name, reply.protocol_version)));
         }
@@ -933,7 +960,7 @@ impl Backend {
                 let tile = tile::encode(&job.hash, t.id, t.first, s.height as u32, s.spectral_nm.len(), &cols);
                 tile::decode(&tile, &want).map_err(|e| TaskError::Failed(format!("invalid result: {e}")))
             }
-            Backend::Remote { uri, client, has_job } => {
+            Backend::Remote { uri, client, has_job, .. } => {
                 let Some(c) = client.as_mut() else { return Err(TaskError::Failed(format!("{uri}: not connected"))) };
                 let mut send_job = !*has_job;
                 let mut stream = loop {
@@ -1047,7 +1074,7 @@ async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u6
                     });
                 }
                 for (b, w) in lines.iter().zip(&stats.workers) {
-                    b.set_message(format!("{:<16} {:<14} {:>4} tasks {:>5} columns {:>7.2} col/s", w.name, w.state, w.tasks_done, w.columns_done, w.columns_per_s));
+                    b.set_message(format!("{:<16} {:<21} {:<14} {:>4} tasks {:>5} columns {:>7.2} col/s", w.name, w.address, w.state, w.tasks_done, w.columns_done, w.columns_per_s));
                     b.tick();
                 }
             }
