@@ -57,13 +57,20 @@ impl Farm {
         self.dir.path().join(name)
     }
 
-    /// Starts a worker with extra (fault) flags; returns its index.
+    /// Starts a worker with extra (fault) flags; returns its index. Its
+    /// load policy is off: the other workers of a test would be its "owner".
     fn start(&mut self, name: &str, extra: &[&str]) -> usize {
+        self.spawn(&[&["--owner-load-limit", "1", "--name", name], extra].concat())
+    }
+
+    /// Starts `sky worker` with these flags besides the listen address,
+    /// threads, priority and token.
+    fn spawn(&mut self, flags: &[&str]) -> usize {
         let mut child = Command::new(SKY)
-            .args(["worker", "--listen", "127.0.0.1:0", "--threads", "1", "--nice", "0", "--owner-load-limit", "1", "--name", name])
+            .args(["worker", "--listen", "127.0.0.1:0", "--threads", "1", "--nice", "0"])
             .arg("--token-file")
             .arg(self.path("token"))
-            .args(extra)
+            .args(flags)
             .env("SKY_CACHE_DIR", "off")
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
@@ -419,19 +426,9 @@ fn schedule_and_owner_load_pause_a_worker() {
     let window = format!("{:02}:{:02}-{:02}:{:02}", a / 60, a % 60, b / 60, b % 60);
     let mut farm = Farm::new();
     let off_hours = farm.start("off-hours", &["--schedule", &window]);
-    // The load policy: the token test workers turn it off; this one keeps it.
-    let mut child = Command::new(SKY)
-        .args(["worker", "--listen", "127.0.0.1:0", "--threads", "1", "--nice", "0", "--owner-load-limit", "0.3", "--name", "polite"])
-        .arg("--token-file")
-        .arg(farm.path("token"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-    let polite_addr = line.trim().strip_prefix("listening on ").unwrap().to_string();
-    farm.workers.push(Worker { child, addr: polite_addr.clone() });
+    // The load policy: the other tests' workers turn it off; this one keeps it.
+    let polite = farm.spawn(&["--owner-load-limit", "0.3", "--name", "polite"]);
+    let polite_addr = farm.workers[polite].addr.clone();
     // The owner's programs: one busy loop per core.
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(2);
     let mut hogs: Vec<Child> = (0..cores).map(|_| Command::new("sh").args(["-c", "while :; do :; done"]).spawn().unwrap()).collect();
