@@ -47,13 +47,17 @@ clean:
 # elevations 10, 2, 0 and -4 degrees (pinhole, 90 degree field of view).
 SUNSET_SIZE ?= 200x100
 SUNSET_SPP ?= 256
+# The hazed sky with a low sun is lit through long, many-times-scattered
+# paths and needs more samples.
+SUNSET_SPP_HAZED ?= 1024
 sunsets: build
 	@mkdir -p docs/images
 	for atm in clear hazed; do \
+	  spp=$(SUNSET_SPP); [ $$atm = hazed ] && spp=$(SUNSET_SPP_HAZED); \
 	  for elev in 10 2 0 -4; do \
 	    zen=$$((90 - $$elev)); \
 	    $(SKY) render atmospheres/$$atm.toml --camera pinhole --look-azimuth-deg 0 --look-elevation-deg 12 --fov-deg 90 \
-	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $(SUNSET_SPP) --denoise \
+	      --size $(SUNSET_SIZE) --sun-zenith-deg $$zen --spp $$spp --denoise \
 	      --out $(OUT)/sunset_$${atm}_$${elev}.exr --png docs/images/sunset_$${atm}_$${elev}.png; \
 	  done; \
 	done
