@@ -16,7 +16,6 @@
 //! sampling (Kulla and Fajardo 2012) for a light at infinity whose
 //! visibility varies along the ray.
 
-use super::rng::Rng;
 use super::tracer::Tracer;
 use glam::DVec3;
 
@@ -27,6 +26,12 @@ const MAX_BIN_TAU: f64 = 0.05;
 /// And at most this fraction of the ray's length per bin.
 const MAX_BIN_FRACTION: f64 = 1.0 / 256.0;
 const MAX_BINS: usize = 4096;
+/// Below this sun transmittance (in every band) a vertex counts as in the
+/// Earth's shadow: the sunlight scattered toward it along the direction it
+/// sends the path on is estimated with a coarse guide (`build_secondary`).
+pub const SHADOW_TRANSMITTANCE: f64 = 0.05;
+/// Bins of the coarse guide of a scattered ray.
+const SECONDARY_BINS: usize = 32;
 
 /// A piecewise-constant density over distance along a ray.
 #[derive(Debug, Clone)]
@@ -40,9 +45,9 @@ pub struct RayGuide {
 impl RayGuide {
     /// The guide for the ray from `origin` along `dir`, with the optics of
     /// `tracer` (which must have a column table); None when nothing on the
-    /// ray is lit (the majorant alone is then used).
+    /// ray is lit (the majorant alone is then used). Fine bins: at most
+    /// 0.05 of majorant optical depth and 1/256 of the ray each.
     pub fn build(tracer: &Tracer, origin: DVec3, dir: DVec3) -> Option<RayGuide> {
-        let columns = tracer.columns?;
         let mut segs = Vec::new();
         let ground = tracer.segments(origin, dir, &tracer.spectral.majorant, &mut segs);
         let end = ground.or(segs.last().map(|s| s.1))?;
@@ -64,39 +69,56 @@ impl RayGuide {
                 break;
             }
         }
-        if *edges.last().unwrap() <= 0.0 {
+        Self::from_edges(&[tracer], origin, dir, edges)
+    }
+
+    /// A coarse guide for a scattered ray leaving a point the sun does not
+    /// reach (see `HeroTracer::radiance`), over the ray's majorant segments
+    /// `segs` up to `end_km` (the ground or the top of the atmosphere): the
+    /// bin edges are `SECONDARY_BINS` equal steps in distance merged with
+    /// as many equal steps in majorant optical depth (so the dense air near
+    /// the start is not lumped into one bin), the integrand summed over
+    /// `tracers` (the bands of a hero set, so the density is the same
+    /// whichever of them is the hero) and taken in each bin as the larger
+    /// of its two edge values. Coarse is enough: the guide only has to find
+    /// where the sun shines, and the majorant half of the mixture covers
+    /// the rest; the shadow is convex, so no bin is lit only inside.
+    pub fn build_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, segs: &[(f64, f64, f64)], end_km: f64) -> Option<RayGuide> {
+        if !(end_km > 0.0) {
             return None;
         }
-        let sp = tracer.spectral;
-        let medium = tracer.medium;
-        let mu_sun = dir.dot(tracer.sun_dir);
+        let mut edges: Vec<f64> = (0..=SECONDARY_BINS).map(|j| end_km * j as f64 / SECONDARY_BINS as f64).collect();
+        let tau_m: f64 = segs.iter().map(|&(a, b, m)| (b.min(end_km) - a).max(0.0) * m).sum();
+        if tau_m > 0.0 {
+            let mut j = 1;
+            let mut acc = 0.0;
+            for &(a, b, m) in segs {
+                let b = b.min(end_km);
+                if b <= a || m <= 0.0 {
+                    continue;
+                }
+                let dt = (b - a) * m;
+                while j < SECONDARY_BINS && (j as f64 * tau_m / SECONDARY_BINS as f64) < acc + dt {
+                    edges.push(a + (j as f64 * tau_m / SECONDARY_BINS as f64 - acc) / m);
+                    j += 1;
+                }
+                acc += dt;
+            }
+        }
+        edges.sort_by(f64::total_cmp);
+        edges.dedup_by(|x, y| (*x - *y).abs() <= 1e-9 * end_km);
+        let values: Vec<f64> = edges.iter().map(|&t| single_scattering(tracers, origin, dir, t)).collect();
+        let bins: Vec<f64> = values.windows(2).map(|v| v[0].max(v[1])).collect();
+        Self::from_bins(edges, &bins)
+    }
+
+    /// The guide from bin edges and a value per bin.
+    fn from_bins(edges: Vec<f64>, values: &[f64]) -> Option<RayGuide> {
         let mut cdf = Vec::with_capacity(edges.len());
         cdf.push(0.0);
         let mut total = 0.0;
-        for w in edges.windows(2) {
-            let (a, b) = (w[0], w[1]);
-            let t = 0.5 * (a + b);
-            let q = origin + dir * t;
-            let z = tracer.altitude(q);
-            let mut value = 0.0;
-            let mut scatter = 0.0;
-            for i in 0..sp.extinction.len() {
-                let s = sp.extinction[i] * medium.density(i, z) * sp.albedo[i];
-                if s > 0.0 {
-                    scatter += s * sp.phase[i].eval(mu_sun);
-                }
-            }
-            if scatter > 0.0 {
-                let t_sun = tracer.transmittance_to_space(q, tracer.sun_dir, &mut Rng::new(0, 0, 0));
-                if t_sun > 0.0 {
-                    let t_cam = match tracer.column_path(columns, origin, dir, Some(t)) {
-                        Some(path) => libm::exp(-columns.path_optical_depth(&path, &sp.extinction)),
-                        None => 0.0,
-                    };
-                    value = scatter * t_cam * t_sun;
-                }
-            }
-            total += value * (b - a);
+        for (w, v) in edges.windows(2).zip(values) {
+            total += v * (w[1] - w[0]);
             cdf.push(total);
         }
         if !(total > 0.0) || !total.is_finite() {
@@ -106,6 +128,16 @@ impl RayGuide {
             *c /= total;
         }
         Some(RayGuide { edges_km: edges, cdf })
+    }
+
+    /// The guide with the single-scattering integrand (summed over
+    /// `tracers`) at each bin's midpoint.
+    fn from_edges(tracers: &[&Tracer], origin: DVec3, dir: DVec3, edges: Vec<f64>) -> Option<RayGuide> {
+        if edges.len() < 2 || *edges.last().unwrap() <= 0.0 {
+            return None;
+        }
+        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, origin, dir, 0.5 * (w[0] + w[1]))).collect();
+        Self::from_bins(edges, &values)
     }
 
     /// A distance drawn from the guide, km.
@@ -131,6 +163,41 @@ impl RayGuide {
         }
         (self.cdf[j] - self.cdf[j - 1]) / w
     }
+}
+
+/// The single-scattering integrand σ_s(t) p(μ_sun) T(0, t) T_sun(t) at
+/// `t_km` along the ray, summed over `tracers` (which share one medium and
+/// need a column table; 0 without one). μ to the sun is the same all along
+/// the ray (parallel light), and the column paths are shared by the bands.
+fn single_scattering(tracers: &[&Tracer], origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
+    let Some(first) = tracers.first() else { return 0.0 };
+    let Some(columns) = first.columns else { return 0.0 };
+    let medium = first.medium;
+    let q = origin + dir * t_km;
+    let z = first.altitude(q);
+    let Some(sun) = first.column_path(columns, q, first.sun_dir, None) else { return 0.0 };
+    let cam = first.column_path(columns, origin, dir, Some(t_km));
+    let mu_sun = dir.dot(first.sun_dir);
+    let mut value = 0.0;
+    for tr in tracers {
+        let sp = tr.spectral;
+        let mut scatter = 0.0;
+        for i in 0..sp.extinction.len() {
+            let s = sp.extinction[i] * medium.density(i, z) * sp.albedo[i];
+            if s > 0.0 {
+                scatter += s * sp.phase[i].eval(mu_sun);
+            }
+        }
+        if scatter > 0.0 {
+            let t_sun = libm::exp(-columns.path_optical_depth(&sun, &sp.extinction));
+            let t_cam = match &cam {
+                Some(path) => libm::exp(-columns.path_optical_depth(path, &sp.extinction)),
+                None => 0.0,
+            };
+            value += scatter * t_cam * t_sun;
+        }
+    }
+    value
 }
 
 #[cfg(test)]

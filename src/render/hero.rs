@@ -12,13 +12,14 @@
 //! phase sampling differ between bands (the null-scattering path integral of
 //! Miller, Georgiev and Jarosz 2019 gives these densities).
 
-use super::guide::RayGuide;
+use super::guide::{RayGuide, SHADOW_TRANSMITTANCE};
 use super::rng::Rng;
 use super::tracer::{choose_forced, Forced, Tracer, EPS_KM};
 use glam::DVec3;
 use std::f64::consts::PI;
 
 pub const HERO_N: usize = 4;
+
 
 /// Four tracers of one medium at the four bands of a hero set (index 0 is the hero).
 pub struct HeroTracer<'a> {
@@ -80,6 +81,66 @@ impl<'a> HeroTracer<'a> {
         h.ratio_track_n(p, d, t_max, self.majorant, |z| self.sigma_t(z), rng)
     }
 
+    /// The four bands' transmittances from `p` to the sun (one shared
+    /// column path when there is a column table).
+    fn sun_transmittance(&self, p: DVec3, rng: &mut Rng) -> [f64; HERO_N] {
+        let h = self.t[0];
+        if let Some(c) = h.columns {
+            return match h.column_path(c, p, h.sun_dir, None) {
+                None => [0.0; HERO_N],
+                Some(path) => std::array::from_fn(|k| libm::exp(-c.path_optical_depth(&path, &self.t[k].spectral.extinction))),
+            };
+        }
+        std::array::from_fn(|k| self.t[k].transmittance_to_space(p, h.sun_dir, rng))
+    }
+
+    /// At a vertex in the Earth's shadow, the sunlight single-scattered
+    /// toward `p` along the scattered direction `d`, estimated by one
+    /// distance drawn from a coarse guide of the integrand (see
+    /// [`RayGuide::build_secondary`]) instead of by the analog flight's
+    /// collision: at twilight the air above the shadow is lit but thin, and
+    /// an analog flight from shadowed haze seldom ends there. The estimate
+    /// has the expectation of the next vertex's next-event estimation
+    /// toward the sun (∫ T(0, t) Σ_i σ_s,i p_i(μ_sun) T_sun dt), which that
+    /// vertex then skips; the path itself goes on by analog flight, so no
+    /// weight grows. The guide is the same whichever band is the hero, so
+    /// the balance heuristic only gains the common factor 1 / g(t).
+    /// Returns false (nothing estimated) when nothing on the ray is lit.
+    #[allow(clippy::too_many_arguments)]
+    fn skylight_along(&self, p: DVec3, d: DVec3, f: &[f64; HERO_N], pk: &[f64; HERO_N], res: &mut [f64; HERO_N], segs: &mut Vec<(f64, f64, f64)>, rng: &mut Rng) -> bool {
+        let h = self.t[0];
+        let ground_t = h.segments(p, d, self.majorant, segs);
+        let end = ground_t.or(segs.last().map(|s| s.1)).unwrap_or(0.0);
+        let Some(guide) = RayGuide::build_secondary(&self.t, p, d, segs, end) else {
+            return false;
+        };
+        let t = guide.sample(rng.uniform());
+        let pdf = guide.pdf(t);
+        if !(pdf > 0.0) {
+            return true; // an edge case of measure zero: the estimate is 0
+        }
+        let q = p + d * t;
+        let z = h.altitude(q);
+        let tr = self.transmittance_to(p, d, t, rng);
+        let t_sun = self.sun_transmittance(q, rng);
+        let mu_s = d.dot(h.sun_dir);
+        let den = pk.iter().sum::<f64>() * pdf;
+        for j in 0..HERO_N {
+            if f[j] == 0.0 || t_sun[j] <= 0.0 {
+                continue;
+            }
+            let mut c_j = 0.0;
+            for i in 0..h.spectral.extinction.len() {
+                let s = self.sigma_s_i(j, i, z);
+                if s > 0.0 {
+                    c_j += s * self.t[j].spectral.phase[i].eval(mu_s);
+                }
+            }
+            res[j] += f[j] * tr[j] * c_j * t_sun[j] / den;
+        }
+        true
+    }
+
     /// One hero path: the radiance estimate of each of the four bands
     /// (relative to each band's solar irradiance, already MIS-weighted and
     /// divided by the hero-selection densities `sel_pdf`), split into the
@@ -101,6 +162,10 @@ impl<'a> HeroTracer<'a> {
         let mut p = origin;
         let mut d = dir;
         let mut segs: Vec<(f64, f64, f64)> = Vec::new();
+        // Whether the sunlight single-scattered toward the last vertex along
+        // `d` has been estimated there (see `skylight_along`): the vertex the
+        // flight finds then skips its next-event estimation toward the sun.
+        let mut sun_done = false;
         for depth in 0..10_000 {
             // --- flight ---
             let mut collision: Option<DVec3> = None;
@@ -180,11 +245,14 @@ impl<'a> HeroTracer<'a> {
                 let g = g + n * EPS_KM;
                 let cos_s = n.dot(h.sun_dir);
                 let den = sum(&pk);
+                let mut shadowed = true;
                 if cos_s > 0.0 {
+                    let t_sun = self.sun_transmittance(g, rng);
+                    shadowed = t_sun.iter().all(|&t| t < SHADOW_TRANSMITTANCE);
                     for j in 0..HERO_N {
                         let a = self.t[j].spectral.ground_albedo;
                         if a > 0.0 {
-                            res[j] += f[j] * a / PI * cos_s * self.t[j].transmittance_to_space(g, h.sun_dir, rng) / den;
+                            res[j] += f[j] * a / PI * cos_s * t_sun[j] / den;
                         }
                     }
                 }
@@ -212,6 +280,7 @@ impl<'a> HeroTracer<'a> {
                 }
                 d = nd;
                 p = g;
+                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, &mut segs, rng);
             } else if let Some(c) = collision {
                 let z = h.altitude(c);
                 let ss = self.sigma_s(z);
@@ -222,11 +291,13 @@ impl<'a> HeroTracer<'a> {
                 let mu_s = d.dot(h.sun_dir);
                 let den = sum(&pk);
                 let k_comp = h.spectral.extinction.len();
+                let t_sun = self.sun_transmittance(c, rng);
+                let shadowed = t_sun.iter().all(|&t| t < SHADOW_TRANSMITTANCE);
                 for j in 0..HERO_N {
-                    if f[j] == 0.0 || ss[j] <= 0.0 {
+                    if sun_done || f[j] == 0.0 || ss[j] <= 0.0 {
                         continue;
                     }
-                    let t = self.t[j].transmittance_to_space(c, h.sun_dir, rng);
+                    let t = t_sun[j];
                     if t > 0.0 {
                         let mut c_j = 0.0;
                         for i in 0..k_comp {
@@ -267,6 +338,7 @@ impl<'a> HeroTracer<'a> {
                 }
                 d = nd;
                 p = c;
+                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, &mut segs, rng);
             }
             // Russian roulette on a quantity symmetric in the four bands, so
             // its probability is the same whichever band is the hero.

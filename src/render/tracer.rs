@@ -10,7 +10,7 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
-use super::guide::RayGuide;
+use super::guide::{RayGuide, SHADOW_TRANSMITTANCE};
 use super::medium::{ColumnPath, ColumnTable, Medium, Phase, Spectral};
 use super::rng::Rng;
 use crate::atmosphere::Geometry;
@@ -63,6 +63,11 @@ pub struct Tracer<'a> {
     /// from its lobe around the sun instead of from the local phase function
     /// (see [`Tracer::sun_lobe`]).
     pub lobe: Option<(usize, f64)>,
+    /// Whether vertices in the Earth's shadow estimate the sunlight
+    /// scattered toward them along their scattered ray (see
+    /// [`Tracer::skylight_along`]; on for the full estimator, needs the
+    /// column table).
+    pub skylight: bool,
 }
 
 /// Probability of drawing a scattered direction from the sun lobe, when the
@@ -89,7 +94,7 @@ impl<'a> Tracer<'a> {
             Estimator::Naive => None,
             Estimator::Full => Tracer::sun_lobe(spectral).map(|i| (i, LOBE_PROBABILITY)),
         };
-        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None, lobe }
+        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None, lobe, skylight: estimator == Estimator::Full }
     }
 
     /// The component whose phase function has the highest forward peak, if
@@ -496,6 +501,46 @@ impl<'a> Tracer<'a> {
 
     /// One path sample of the radiance arriving at `origin` from direction
     /// `-dir` (looking along `dir`), relative to the sun's irradiance.
+    /// At a vertex in the Earth's shadow, adds to `l` the sunlight single-
+    /// scattered toward `p` along the scattered direction `d` (throughput
+    /// `beta`), estimated with one distance drawn from a coarse guide of
+    /// the integrand ∫ T(0, t) Σ_i σ_s,i p_i(μ_sun) T_sun dt (see
+    /// [`RayGuide::build_secondary`]). That is the expectation of the next
+    /// vertex's next-event estimation toward the sun, which the caller then
+    /// skips; the path goes on by analog flight, so no weight grows. At
+    /// twilight the air above the shadow is lit but thin, and an analog
+    /// flight from shadowed haze seldom ends there. Returns false (nothing
+    /// estimated) when nothing on the ray is lit.
+    pub(crate) fn skylight_along(&self, p: DVec3, d: DVec3, beta: f64, l: &mut f64, segs: &mut Vec<(f64, f64, f64)>, rng: &mut Rng) -> bool {
+        let ground = self.segments(p, d, &self.spectral.majorant, segs);
+        let end = ground.or(segs.last().map(|s| s.1)).unwrap_or(0.0);
+        let Some(guide) = RayGuide::build_secondary(&[self], p, d, segs, end) else {
+            return false;
+        };
+        let t = guide.sample(rng.uniform());
+        let pdf = guide.pdf(t);
+        if !(pdf > 0.0) {
+            return true; // an edge case of measure zero: the estimate is 0
+        }
+        let q = p + d * t;
+        let z = self.altitude(q);
+        let t_sun = self.transmittance_to_space(q, self.sun_dir, rng);
+        if t_sun <= 0.0 {
+            return true;
+        }
+        let sp = self.spectral;
+        let mu_s = d.dot(self.sun_dir);
+        let mut c = 0.0;
+        for i in 0..sp.extinction.len() {
+            let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
+            if s > 0.0 {
+                c += s * sp.phase[i].eval(mu_s);
+            }
+        }
+        *l += beta * self.transmittance_to(p, d, t, rng) * c * t_sun / pdf;
+        true
+    }
+
     pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> f64 {
         let (direct, scattered) = self.radiance_parts(origin, dir, None, rng);
         direct + scattered
@@ -516,6 +561,9 @@ impl<'a> Tracer<'a> {
         let mut p = origin;
         let mut d = dir;
         let mut segs = Vec::new();
+        // Whether the last vertex estimated the sunlight scattered toward
+        // it along `d` (see `skylight_along`).
+        let mut sun_done = false;
         for depth in 0..MAX_BOUNCES {
             // Forced collisions on the camera ray only: later bounces fly
             // analogously, so escaping paths end instead of carrying ever
@@ -544,10 +592,13 @@ impl<'a> Tracer<'a> {
                     }
                     let n = self.up(q);
                     let q = q + n * EPS_KM;
+                    let mut shadowed = true;
                     if !naive {
                         let cos_s = n.dot(self.sun_dir);
                         if cos_s > 0.0 {
-                            l += beta * a / PI * cos_s * self.transmittance_to_space(q, self.sun_dir, rng);
+                            let t_sun = self.transmittance_to_space(q, self.sun_dir, rng);
+                            shadowed = t_sun < SHADOW_TRANSMITTANCE;
+                            l += beta * a / PI * cos_s * t_sun;
                         }
                     }
                     beta *= a;
@@ -563,6 +614,7 @@ impl<'a> Tracer<'a> {
                     }
                     d = nd;
                     p = q;
+                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, &mut segs, rng);
                 }
                 Flight::Collision(q) => {
                     let z = self.altitude(q);
@@ -598,14 +650,17 @@ impl<'a> Tracer<'a> {
                         pick -= s;
                     }
                     let phase = &sp.phase[which];
+                    let mut shadowed = false;
                     if !naive {
                         // Next-event estimation with the mixture of every
                         // scatterer's phase function (weighted by its
                         // scattering coefficient), not just the one picked
                         // to continue the path: removes the noise of that
                         // choice where a forward-peaked aerosol sees the sun.
+                        // Skipped when the previous vertex estimated it.
                         let t = self.transmittance_to_space(q, self.sun_dir, rng);
-                        if t > 0.0 {
+                        shadowed = t < SHADOW_TRANSMITTANCE;
+                        if t > 0.0 && !sun_done {
                             let mu_s = d.dot(self.sun_dir);
                             let mut p_mix = 0.0;
                             for i in 0..k {
@@ -635,6 +690,7 @@ impl<'a> Tracer<'a> {
                     }
                     d = nd;
                     p = q;
+                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, &mut segs, rng);
                 }
             }
             // Russian roulette on the path throughput (unbiased).
