@@ -73,41 +73,21 @@ impl RayGuide {
     }
 
     /// A coarse guide for a scattered ray leaving a point the sun does not
-    /// reach (see `HeroTracer::radiance`), over the ray's majorant segments
-    /// `segs` up to `end_km` (the ground or the top of the atmosphere): the
-    /// bin edges are `SECONDARY_BINS` equal steps in distance merged with
-    /// as many equal steps in majorant optical depth (so the dense air near
-    /// the start is not lumped into one bin), the integrand summed over
-    /// `tracers` (the bands of a hero set, so the density is the same
-    /// whichever of them is the hero) and taken in each bin as the larger
-    /// of its two edge values. Coarse is enough: the guide only has to find
-    /// where the sun shines, and the majorant half of the mixture covers
-    /// the rest; the shadow is convex, so no bin is lit only inside.
-    pub fn build_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, segs: &[(f64, f64, f64)], end_km: f64) -> Option<RayGuide> {
+    /// reach (see `Tracer::skylight_along`): `SECONDARY_BINS` equal bins
+    /// from `origin` to the end of the ray (`end_km`: the ground or the top
+    /// of the atmosphere), the integrand summed over `tracers` (the bands
+    /// of a hero set, so the density is the same whichever of them is the
+    /// hero) and taken in each bin as the larger of its two edge values.
+    /// Coarse is enough: the guide only has to find where the sun shines.
+    /// It covers every lit point: the Earth's shadow is convex, so a bin
+    /// whose two edges are in shadow is in shadow all along.
+    pub fn build_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, end_km: f64) -> Option<RayGuide> {
         if !(end_km > 0.0) {
             return None;
         }
-        let mut edges: Vec<f64> = (0..=SECONDARY_BINS).map(|j| end_km * j as f64 / SECONDARY_BINS as f64).collect();
-        let tau_m: f64 = segs.iter().map(|&(a, b, m)| (b.min(end_km) - a).max(0.0) * m).sum();
-        if tau_m > 0.0 {
-            let mut j = 1;
-            let mut acc = 0.0;
-            for &(a, b, m) in segs {
-                let b = b.min(end_km);
-                if b <= a || m <= 0.0 {
-                    continue;
-                }
-                let dt = (b - a) * m;
-                while j < SECONDARY_BINS && (j as f64 * tau_m / SECONDARY_BINS as f64) < acc + dt {
-                    edges.push(a + (j as f64 * tau_m / SECONDARY_BINS as f64 - acc) / m);
-                    j += 1;
-                }
-                acc += dt;
-            }
-        }
-        edges.sort_by(f64::total_cmp);
-        edges.dedup_by(|x, y| (*x - *y).abs() <= 1e-9 * end_km);
-        let values: Vec<f64> = edges.iter().map(|&t| single_scattering(tracers, origin, dir, t)).collect();
+        let edges: Vec<f64> = (0..=SECONDARY_BINS).map(|j| end_km * j as f64 / SECONDARY_BINS as f64).collect();
+        let phases = phases_to_sun(tracers, dir);
+        let values: Vec<f64> = edges.iter().map(|&t| single_scattering(tracers, &phases, origin, dir, t)).collect();
         let bins: Vec<f64> = values.windows(2).map(|v| v[0].max(v[1])).collect();
         Self::from_bins(edges, &bins)
     }
@@ -136,7 +116,8 @@ impl RayGuide {
         if edges.len() < 2 || *edges.last().unwrap() <= 0.0 {
             return None;
         }
-        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, origin, dir, 0.5 * (w[0] + w[1]))).collect();
+        let phases = phases_to_sun(tracers, dir);
+        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, &phases, origin, dir, 0.5 * (w[0] + w[1]))).collect();
         Self::from_bins(edges, &values)
     }
 
@@ -165,11 +146,25 @@ impl RayGuide {
     }
 }
 
+/// Each tracer's phase functions toward the sun for a ray along `dir`:
+/// μ to the sun is the same all along the ray (parallel light), so they
+/// are constants of the ray.
+fn phases_to_sun(tracers: &[&Tracer], dir: DVec3) -> Vec<Vec<f64>> {
+    tracers
+        .iter()
+        .map(|t| {
+            let sp = t.spectral;
+            let mu_sun = dir.dot(t.sun_dir);
+            (0..sp.extinction.len()).map(|i| if sp.albedo[i] > 0.0 { sp.phase[i].eval(mu_sun) } else { 0.0 }).collect()
+        })
+        .collect()
+}
+
 /// The single-scattering integrand σ_s(t) p(μ_sun) T(0, t) T_sun(t) at
 /// `t_km` along the ray, summed over `tracers` (which share one medium and
-/// need a column table; 0 without one). μ to the sun is the same all along
-/// the ray (parallel light), and the column paths are shared by the bands.
-fn single_scattering(tracers: &[&Tracer], origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
+/// need a column table; 0 without one), with their `phases` toward the sun
+/// (see [`phases_to_sun`]). The column paths are shared by the bands.
+fn single_scattering(tracers: &[&Tracer], phases: &[Vec<f64>], origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
     let Some(first) = tracers.first() else { return 0.0 };
     let Some(columns) = first.columns else { return 0.0 };
     let medium = first.medium;
@@ -177,15 +172,13 @@ fn single_scattering(tracers: &[&Tracer], origin: DVec3, dir: DVec3, t_km: f64) 
     let z = first.altitude(q);
     let Some(sun) = first.column_path(columns, q, first.sun_dir, None) else { return 0.0 };
     let cam = first.column_path(columns, origin, dir, Some(t_km));
-    let mu_sun = dir.dot(first.sun_dir);
     let mut value = 0.0;
-    for tr in tracers {
+    for (tr, phase) in tracers.iter().zip(phases) {
         let sp = tr.spectral;
         let mut scatter = 0.0;
         for i in 0..sp.extinction.len() {
-            let s = sp.extinction[i] * medium.density(i, z) * sp.albedo[i];
-            if s > 0.0 {
-                scatter += s * sp.phase[i].eval(mu_sun);
+            if phase[i] > 0.0 {
+                scatter += sp.extinction[i] * medium.density(i, z) * sp.albedo[i] * phase[i];
             }
         }
         if scatter > 0.0 {

@@ -106,12 +106,9 @@ impl<'a> HeroTracer<'a> {
     /// weight grows. The guide is the same whichever band is the hero, so
     /// the balance heuristic only gains the common factor 1 / g(t).
     /// Returns false (nothing estimated) when nothing on the ray is lit.
-    #[allow(clippy::too_many_arguments)]
-    fn skylight_along(&self, p: DVec3, d: DVec3, f: &[f64; HERO_N], pk: &[f64; HERO_N], res: &mut [f64; HERO_N], segs: &mut Vec<(f64, f64, f64)>, rng: &mut Rng) -> bool {
+    fn skylight_along(&self, p: DVec3, d: DVec3, f: &[f64; HERO_N], pk: &[f64; HERO_N], res: &mut [f64; HERO_N], rng: &mut Rng) -> bool {
         let h = self.t[0];
-        let ground_t = h.segments(p, d, self.majorant, segs);
-        let end = ground_t.or(segs.last().map(|s| s.1)).unwrap_or(0.0);
-        let Some(guide) = RayGuide::build_secondary(&self.t, p, d, segs, end) else {
+        let Some(guide) = RayGuide::build_secondary(&self.t, p, d, h.ray_end(p, d).unwrap_or(0.0)) else {
             return false;
         };
         let t = guide.sample(rng.uniform());
@@ -280,7 +277,7 @@ impl<'a> HeroTracer<'a> {
                 }
                 d = nd;
                 p = g;
-                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, &mut segs, rng);
+                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, rng);
             } else if let Some(c) = collision {
                 let z = h.altitude(c);
                 let ss = self.sigma_s(z);
@@ -338,7 +335,7 @@ impl<'a> HeroTracer<'a> {
                 }
                 d = nd;
                 p = c;
-                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, &mut segs, rng);
+                sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, rng);
             }
             // Russian roulette on a quantity symmetric in the four bands, so
             // its probability is the same whichever band is the hero.

@@ -277,6 +277,13 @@ impl<'a> Tracer<'a> {
         }
     }
 
+    /// The distance from `p` along `d` to the ground, or else to the top of
+    /// the atmosphere (None when the ray never meets either, as a ray
+    /// leaving the top of the atmosphere).
+    pub(crate) fn ray_end(&self, p: DVec3, d: DVec3) -> Option<f64> {
+        self.distance_to_altitude(p, d, 0.0, false).or_else(|| self.distance_to_altitude(p, d, self.medium.top_km, true))
+    }
+
     /// The shell at `p` and the distance along `d` to its boundary, with
     /// what lies beyond: Some(next shell) or None for space (ground is
     /// reported as shell usize::MAX).
@@ -511,10 +518,8 @@ impl<'a> Tracer<'a> {
     /// twilight the air above the shadow is lit but thin, and an analog
     /// flight from shadowed haze seldom ends there. Returns false (nothing
     /// estimated) when nothing on the ray is lit.
-    pub(crate) fn skylight_along(&self, p: DVec3, d: DVec3, beta: f64, l: &mut f64, segs: &mut Vec<(f64, f64, f64)>, rng: &mut Rng) -> bool {
-        let ground = self.segments(p, d, &self.spectral.majorant, segs);
-        let end = ground.or(segs.last().map(|s| s.1)).unwrap_or(0.0);
-        let Some(guide) = RayGuide::build_secondary(&[self], p, d, segs, end) else {
+    pub(crate) fn skylight_along(&self, p: DVec3, d: DVec3, beta: f64, l: &mut f64, rng: &mut Rng) -> bool {
+        let Some(guide) = RayGuide::build_secondary(&[self], p, d, self.ray_end(p, d).unwrap_or(0.0)) else {
             return false;
         };
         let t = guide.sample(rng.uniform());
@@ -614,7 +619,7 @@ impl<'a> Tracer<'a> {
                     }
                     d = nd;
                     p = q;
-                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, &mut segs, rng);
+                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, rng);
                 }
                 Flight::Collision(q) => {
                     let z = self.altitude(q);
@@ -690,7 +695,7 @@ impl<'a> Tracer<'a> {
                     }
                     d = nd;
                     p = q;
-                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, &mut segs, rng);
+                    sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, rng);
                 }
             }
             // Russian roulette on the path throughput (unbiased).
