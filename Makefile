@@ -49,7 +49,7 @@ SUNSET_SIZE ?= 200x100
 SUNSET_SPP ?= 256
 # The hazed sky with a low sun is lit through long, many-times-scattered
 # paths and needs more samples.
-SUNSET_SPP_HAZED ?= 1024
+SUNSET_SPP_HAZED ?= 512
 sunsets: build
 	@mkdir -p docs/images
 	for atm in clear hazed; do \
