@@ -16,6 +16,7 @@
 //! sampling (Kulla and Fajardo 2012) for a light at infinity whose
 //! visibility varies along the ray.
 
+use super::rng::Rng;
 use super::tracer::Tracer;
 use glam::DVec3;
 
@@ -29,7 +30,13 @@ const MAX_BINS: usize = 4096;
 /// Below this sun transmittance (in every band) a vertex counts as in the
 /// Earth's shadow: the sunlight scattered toward it along the direction it
 /// sends the path on is estimated with a coarse guide (`build_secondary`).
-pub const SHADOW_TRANSMITTANCE: f64 = 0.05;
+/// Measured on the hazed sky over 24 directions, 3000 samples each
+/// (variance × time against the tracer without the estimate, median over
+/// the directions): with the sun 4° below the horizon 5.2× better at 1e-6,
+/// 5.1× at 1e-3, 3.9× at 0.05; with the sun 2° above it 1.0×, 0.47× and
+/// 0.55×: where the sun still reaches the air, next-event estimation does
+/// the job and the guide only costs time.
+pub const SHADOW_TRANSMITTANCE: f64 = 1e-6;
 /// Bins of the coarse guide of a scattered ray.
 const SECONDARY_BINS: usize = 32;
 
@@ -90,6 +97,16 @@ impl RayGuide {
         let values: Vec<f64> = edges.iter().map(|&t| single_scattering(tracers, &phases, origin, dir, t)).collect();
         let bins: Vec<f64> = values.windows(2).map(|v| v[0].max(v[1])).collect();
         Self::from_bins(edges, &bins)
+    }
+
+    /// A distance along the ray from `origin` (to the ground or the top of
+    /// the atmosphere) drawn from [`build_secondary`](Self::build_secondary)'s
+    /// guide, with its density; None when nothing on the ray is lit.
+    pub(crate) fn sample_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, rng: &mut Rng) -> Option<(f64, f64)> {
+        let first = tracers.first()?;
+        let guide = Self::build_secondary(tracers, origin, dir, first.ray_end(origin, dir)?)?;
+        let t = guide.sample(rng.uniform());
+        Some((t, guide.pdf(t)))
     }
 
     /// The guide from bin edges and a value per bin.

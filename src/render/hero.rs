@@ -108,14 +108,11 @@ impl<'a> HeroTracer<'a> {
     /// Returns false (nothing estimated) when nothing on the ray is lit.
     fn skylight_along(&self, p: DVec3, d: DVec3, f: &[f64; HERO_N], pk: &[f64; HERO_N], res: &mut [f64; HERO_N], rng: &mut Rng) -> bool {
         let h = self.t[0];
-        let Some(guide) = RayGuide::build_secondary(&self.t, p, d, h.ray_end(p, d).unwrap_or(0.0)) else {
-            return false;
+        let (t, pdf) = match RayGuide::sample_secondary(&self.t, p, d, rng) {
+            None => return false,
+            Some((_, pdf)) if !(pdf > 0.0) => return true, // measure zero: the estimate is 0
+            Some(s) => s,
         };
-        let t = guide.sample(rng.uniform());
-        let pdf = guide.pdf(t);
-        if !(pdf > 0.0) {
-            return true; // an edge case of measure zero: the estimate is 0
-        }
         let q = p + d * t;
         let z = h.altitude(q);
         let tr = self.transmittance_to(p, d, t, rng);

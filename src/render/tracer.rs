@@ -519,14 +519,11 @@ impl<'a> Tracer<'a> {
     /// flight from shadowed haze seldom ends there. Returns false (nothing
     /// estimated) when nothing on the ray is lit.
     pub(crate) fn skylight_along(&self, p: DVec3, d: DVec3, beta: f64, l: &mut f64, rng: &mut Rng) -> bool {
-        let Some(guide) = RayGuide::build_secondary(&[self], p, d, self.ray_end(p, d).unwrap_or(0.0)) else {
-            return false;
+        let (t, pdf) = match RayGuide::sample_secondary(&[self], p, d, rng) {
+            None => return false,
+            Some((_, pdf)) if !(pdf > 0.0) => return true, // measure zero: the estimate is 0
+            Some(s) => s,
         };
-        let t = guide.sample(rng.uniform());
-        let pdf = guide.pdf(t);
-        if !(pdf > 0.0) {
-            return true; // an edge case of measure zero: the estimate is 0
-        }
         let q = p + d * t;
         let z = self.altitude(q);
         let t_sun = self.transmittance_to_space(q, self.sun_dir, rng);
