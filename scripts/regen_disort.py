@@ -9,6 +9,9 @@ so that the Monte Carlo renderer can be compared against them without Python.
     .venv-disort/bin/pip install -r scripts/requirements-disort.txt
     .venv-disort/bin/python scripts/regen_disort.py
 
+The cloud-slab references (tests/reference/disort_clouds.json, multi-layer) come from the sibling
+scripts/regen_disort_clouds.py, which imports this module's constants and helpers.
+
 Both test atmospheres have the same composition at every height (one exponential profile shared
 by the air and the aerosol), so optically each is a single homogeneous layer of total optical depth
 tau = tau_R + tau_A, single-scattering albedo omega = (tau_R + ssa_A tau_A) / tau and phase-function

@@ -150,3 +150,20 @@ fn mutated_files_never_panic_and_errors_are_located() {
     }
     assert!(failures > 100, "mutations should mostly break files ({failures})");
 }
+
+/// An atmosphere without a `[sun]` table gets the shipped sun: the ASTM
+/// G173-03 spectrum of atmospheres/data/astm_g173_etr.csv and a 0.533°
+/// disk, and a content hash of its own.
+#[test]
+fn a_file_without_a_sun_gets_the_shipped_one() {
+    let path = root().join("tests/atmospheres/disort_rayleigh.toml");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let cut = text.find("[sun]").expect("the test file has a [sun] table");
+    let without = Atmosphere::from_str(&path, &text[..cut]).unwrap_or_else(|e| panic!("{e}"));
+    let with = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
+    assert_eq!(without.sun.angular_diameter_deg, 0.533);
+    for l in [300.0, 450.0, 550.0, 700.0, 1000.0] {
+        assert_eq!(without.sun.irradiance_w_m2_nm.eval(l), with.sun.irradiance_w_m2_nm.eval(l), "{l} nm");
+    }
+    assert_ne!(without.content_hash, Atmosphere::load(&path).unwrap().content_hash);
+}

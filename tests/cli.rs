@@ -261,3 +261,27 @@ fn farm_flags_and_files_are_checked() {
     assert!(err.contains("no worker left") && err.contains("127.0.0.1:9"), "{err}");
     assert!(!out.exists());
 }
+
+/// A reader that goes away (`sky mie ... | head -2`) ends the program
+/// quietly with exit code 0, as ripgrep does, instead of a panic (101).
+/// The pipe is closed before the child writes its first line.
+#[test]
+fn closed_stdout_exits_quietly() {
+    use std::process::Stdio;
+    let c = tempfile::tempdir().unwrap();
+    for args in [&["mie", "--m", "1.33-1e-7i", "--x", "10", "--angles-deg", "0,1,2,3,4,5,10,20,30,60,90,120,150,180"][..], &["atmosphere", "inspect", "atmospheres/clear.toml"][..]] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
+            .args(args)
+            .current_dir(root())
+            .env("SKY_CACHE_DIR", c.path())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        drop(child.stdout.take());
+        let o = child.wait_with_output().unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}

@@ -1,14 +1,23 @@
-//! The path tracer against DISORT (PythonicDISORT 1.8, via
-//! `scripts/regen_disort.py` → `tests/reference/disort.json`): plane-parallel
-//! slabs over a Lambertian ground (albedo 0.3), sun at 60°, diffuse sky
-//! radiance at the ground at 450, 550 and 650 nm, relative to the solar
-//! irradiance. Acceptance: within 3 standard errors everywhere, and within
-//! 1 % wherever the standard error is below 0.3 %.
+//! The path tracer against DISORT (PythonicDISORT 1.8): plane-parallel
+//! slabs, sun at 60°, diffuse sky radiance at the ground at 450, 550 and
+//! 650 nm, relative to the solar irradiance. `tests/reference/disort.json`
+//! (`scripts/regen_disort.py`): Rayleigh and Rayleigh + HG aerosol over a
+//! Lambertian ground of albedo 0.3; `tests/reference/disort_clouds.json`
+//! (`scripts/regen_disort_clouds.py`): Rayleigh air with an HG cloud
+//! (g 0.85) of optical depth 1, 9 or 60 at 3-5 km over a ground of 0.1.
+//! Acceptance: every z-score within the Šidák threshold of its family at a
+//! 1 % family-wise false-alarm rate (about 3.7 for 72 comparisons) and the
+//! family's aggregate Σz/√m within 2.58 (see `common`), and within 1 %
+//! (clear slabs) or 2 % (clouds) wherever the standard error is below a
+//! third of that.
 //!
 //! The CI test checks a subset of the view directions at a sample count
 //! that keeps it to a few minutes on two cores; `cargo test --release --test
 //! disort -- --ignored` runs the whole grid with more samples.
 
+mod common;
+
+use common::Family;
 use serde_json::Value;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -21,16 +30,20 @@ fn root() -> PathBuf {
 }
 
 struct Stats {
-    compared: usize,
-    beyond_3se: Vec<String>,
-    beyond_1pct_precise: Vec<String>,
+    family: Family,
+    beyond_tolerance_precise: Vec<String>,
     precise: usize,
-    worst_z: f64,
+    /// Core-seconds of rendering per case label.
+    seconds: Vec<(String, f64)>,
 }
 
-fn run(view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> u32) -> Stats {
-    let r: Value = serde_json::from_str(&std::fs::read_to_string(root().join("tests/reference/disort.json")).unwrap()).unwrap();
-    let mut st = Stats { compared: 0, beyond_3se: vec![], beyond_1pct_precise: vec![], precise: 0, worst_z: 0.0 };
+/// Compares every case of `reference` (a JSON file under tests/reference)
+/// at the directions in `view_zeniths` x `azimuths`, with `spp_for(name)`
+/// samples; a comparison is precise when its standard error is below a
+/// third of `tolerance` (relative), and must then be within it.
+fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> u32, tolerance: f64) -> Stats {
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(root().join(reference)).unwrap()).unwrap();
+    let mut st = Stats { family: Family::default(), beyond_tolerance_precise: vec![], precise: 0, seconds: vec![] };
     for (case_index, case) in r["cases"].as_array().unwrap().iter().enumerate() {
         let atm = Atmosphere::load(&root().join(case["atmosphere"].as_str().unwrap())).unwrap();
         let spp = spp_for(&atm.name);
@@ -51,43 +64,49 @@ fn run(view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> u32) ->
         let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, 2023 + case_index as u64, false);
         let cache = MieCache::new(None);
         let scene = Scene::new(&atm, &settings, &cache, &|| {});
+        let t0 = std::time::Instant::now();
         let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+        st.seconds.push((format!("{} {l} nm", atm.name), t0.elapsed().as_secs_f64() * rayon::current_num_threads() as f64));
         let e_sun = atm.sun.irradiance_w_m2_nm.eval(l);
         for (k, px) in img.pixels.iter().enumerate() {
             let ours = px.spectral[0] / e_sun;
             let se = px.spectral_stderr[0] / e_sun;
             let want = expect[k];
-            let z = (ours - want).abs() / se.max(1e-300);
+            let z = (ours - want) / se.max(1e-300);
             let rel = (ours - want).abs() / want;
-            let label = format!("{} {l} nm view ({}, {}): ours {ours:.6e} ± {se:.1e}, DISORT {want:.6e} ({z:.2} se, {:.2} %)", atm.name, dirs[k].0, dirs[k].1, 100.0 * rel);
-            st.compared += 1;
-            st.worst_z = st.worst_z.max(z);
-            if z > 3.0 {
-                st.beyond_3se.push(label.clone());
-            }
-            if se / want < 0.003 {
+            let label = format!("{} {l} nm view ({}, {}): ours {ours:.6e} ± {se:.1e}, DISORT {want:.6e} ({z:+.2} se, {:.2} %)", atm.name, dirs[k].0, dirs[k].1, 100.0 * rel);
+            if se / want < tolerance / 3.0 {
                 st.precise += 1;
-                if rel > 0.01 {
-                    st.beyond_1pct_precise.push(label.clone());
+                if rel > tolerance {
+                    st.beyond_tolerance_precise.push(label.clone());
                 }
             }
             eprintln!("{label}");
+            st.family.push(label, z);
         }
     }
     st
 }
 
+fn check(st: &Stats, compared: usize, min_precise: usize, tolerance: f64) {
+    eprintln!("{} compared, aggregate Σz/√m {:+.2}, {} with se < {:.2} %", st.family.z.len(), st.family.aggregate(), st.precise, 100.0 * tolerance / 3.0);
+    for (label, s) in &st.seconds {
+        eprintln!("  {label}: {s:.1} core-seconds");
+    }
+    assert_eq!(st.family.z.len(), compared);
+    assert!(st.precise >= min_precise, "too few precise comparisons to test the {} % criterion", 100.0 * tolerance);
+    let failures = st.family.failures(0.01);
+    assert!(failures.is_empty(), "disagreements with DISORT:\n{}", failures.join("\n"));
+    assert!(st.beyond_tolerance_precise.is_empty(), "beyond {} % where converged:\n{}", 100.0 * tolerance, st.beyond_tolerance_precise.join("\n"));
+}
+
 #[test]
 fn path_tracer_agrees_with_disort() {
     // The Rayleigh slab with enough samples that many standard errors fall
-    // below 0.3 %, so the 1 % criterion is exercised; the aerosol slab is
-    // noisier per sample and is held to the 3-standard-error criterion.
-    let st = run(&[0.0, 40.0, 70.0, 85.0], &[0.0, 90.0, 180.0], &|name| if name == "disort-rayleigh" { 80_000 } else { 20_000 });
-    eprintln!("{} compared, worst {:.2} se, {} with se < 0.3 %", st.compared, st.worst_z, st.precise);
-    assert_eq!(st.compared, 2 * 3 * 12);
-    assert!(st.precise >= 10, "too few precise comparisons to test the 1 % criterion");
-    assert!(st.beyond_3se.is_empty(), "beyond 3 standard errors:\n{}", st.beyond_3se.join("\n"));
-    assert!(st.beyond_1pct_precise.is_empty(), "beyond 1 % where se < 0.3 %:\n{}", st.beyond_1pct_precise.join("\n"));
+    // below 0.33 %, so the 1 % criterion is exercised; the aerosol slab is
+    // noisier per sample and is held mostly to the z-score criteria.
+    let st = run("tests/reference/disort.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 90.0, 180.0], &|name| if name == "disort-rayleigh" { 80_000 } else { 20_000 }, 0.01);
+    check(&st, 2 * 3 * 12, 10, 0.01);
 }
 
 #[test]
@@ -95,8 +114,30 @@ fn path_tracer_agrees_with_disort() {
 fn path_tracer_agrees_with_disort_full_grid() {
     let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
     let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
-    let st = run(&zs, &az, &|_| 100_000);
-    eprintln!("{} compared, worst {:.2} se, {} with se < 0.3 %", st.compared, st.worst_z, st.precise);
-    assert!(st.beyond_3se.is_empty(), "beyond 3 standard errors:\n{}", st.beyond_3se.join("\n"));
-    assert!(st.beyond_1pct_precise.is_empty(), "beyond 1 % where se < 0.3 %:\n{}", st.beyond_1pct_precise.join("\n"));
+    let st = run("tests/reference/disort.json", &zs, &az, &|_| 100_000, 0.01);
+    check(&st, 2 * 3 * 70, 100, 0.01);
+}
+
+/// Samples per direction of the cloud test, per slab.
+fn cloud_spp(name: &str) -> u32 {
+    match name {
+        "disort-cloud-tau1" => 20_000,
+        "disort-cloud-tau9" => 8_000,
+        _ => 4_000,
+    }
+}
+
+#[test]
+fn path_tracer_agrees_with_disort_under_clouds() {
+    let st = run("tests/reference/disort_clouds.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 180.0], &cloud_spp, 0.02);
+    check(&st, 3 * 3 * 8, 0, 0.02);
+}
+
+#[test]
+#[ignore = "the full DISORT cloud grid at 2 % on every direction: long (make validate)"]
+fn path_tracer_agrees_with_disort_under_clouds_full_grid() {
+    let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
+    let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
+    let st = run("tests/reference/disort_clouds.json", &zs, &az, &|name| 25 * cloud_spp(name), 0.02);
+    check(&st, 3 * 3 * 70, 100, 0.02);
 }

@@ -8,6 +8,15 @@ use serde::Deserialize;
 use std::collections::{BTreeMap, HashMap};
 use toml::Spanned;
 
+/// The sun of an atmosphere file without a `[sun]` table: the ASTM G173-03
+/// extraterrestrial spectrum shipped as `atmospheres/data/astm_g173_etr.csv`
+/// (its provenance is in the file's header), built into the binary so the
+/// default works wherever the file lives.
+pub const DEFAULT_SUN_CSV: &str = include_str!("../../atmospheres/data/astm_g173_etr.csv");
+/// Its angular diameter, degrees: the mean apparent diameter of the sun
+/// (about 0.533°, 31.99 arcminutes at 1 AU).
+pub const DEFAULT_SUN_DIAMETER_DEG: f64 = 0.533;
+
 type S<T> = Spanned<T>;
 
 #[derive(Deserialize)]
@@ -603,8 +612,11 @@ pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec
     // [sun]
     let sun = match &raw.sun {
         None => {
-            ctx.err_at(0, "missing [sun] table (spectrum, angular_diameter_deg)");
-            None
+            // The shipped sun (see `DEFAULT_SUN_CSV`), part of the content hash by name.
+            ctx.hasher.update(b"[sun] default: ASTM G173-03 extraterrestrial, 0.533 deg");
+            let path = std::path::Path::new("<built-in>/astm_g173_etr.csv");
+            let t = Table::parse(path, DEFAULT_SUN_CSV).and_then(|t| t.function("irradiance_w_m2_nm")).expect("the built-in sun spectrum parses");
+            Some(Sun { irradiance_w_m2_nm: t, angular_diameter_deg: DEFAULT_SUN_DIAMETER_DEG })
         }
         Some(s) => {
             let s = s.get_ref();

@@ -43,7 +43,7 @@ pub fn run(c: AtmosphereCommand) -> Result<ExitCode> {
             let mut bad = 0;
             for f in &files {
                 match Atmosphere::load(f) {
-                    Ok(a) => println!("{}: ok ({} profiles, {} absorbers, {} aerosols)", f.display(), a.profiles.len(), a.absorbers.len(), a.aerosols.len()),
+                    Ok(a) => outln!("{}: ok ({} profiles, {} absorbers, {} aerosols)", f.display(), a.profiles.len(), a.absorbers.len(), a.aerosols.len()),
                     Err(e) => {
                         bad += 1;
                         eprintln!("{e}");
@@ -101,7 +101,7 @@ fn inspect(file: &Path, wavelengths: &[f64], as_json: bool, plot_dir: Option<&Pa
             },
             "spectral": spectral,
         });
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         print_table(&atm, &spectral, sun_xyz);
     }
@@ -124,11 +124,11 @@ fn progress(n: u64, what: &str) -> ProgressBar {
 
 fn print_table(atm: &Atmosphere, spectral: &[SpectralOptics], sun_xyz: [f64; 3]) {
     let xy = spectrum::chromaticity(sun_xyz);
-    println!("{} ({})", atm.name, atm.path.display());
+    outln!("{} ({})", atm.name, atm.path.display());
     if !atm.description.is_empty() {
-        println!("  {}", atm.description.trim());
+        outln!("  {}", atm.description.trim());
     }
-    println!(
+    outln!(
         "  planet: radius {} km, top {} km, {:?}; sun {} deg, xy ({:.4}, {:.4}); content hash {}",
         atm.planet.radius_km,
         atm.planet.top_km,
@@ -139,14 +139,14 @@ fn print_table(atm: &Atmosphere, spectral: &[SpectralOptics], sun_xyz: [f64; 3])
         &atm.content_hash[..16]
     );
     for s in spectral {
-        println!();
-        println!(
+        outln!();
+        outln!(
             "  {} nm: optical depth rayleigh {:.5}  absorbers {:.5}  aerosols {:.5}",
             s.wavelength_nm, s.rayleigh_optical_depth, s.absorber_optical_depth, s.aerosol_optical_depth
         );
-        println!("    {:<24} {:>10} {:>10} {:>10} {:>10} {:>14}", "component", "kind", "tau", "ssa", "g", "ext0_per_km");
+        outln!("    {:<24} {:>10} {:>10} {:>10} {:>10} {:>14}", "component", "kind", "tau", "ssa", "g", "ext0_per_km");
         for c in s.components.iter().chain(std::iter::once(&s.total)) {
-            println!(
+            outln!(
                 "    {:<24} {:>10} {:>10.5} {:>10.5} {:>10.5} {:>14.5e}",
                 c.name, c.kind, c.optical_depth, c.single_scattering_albedo, c.asymmetry, c.extinction_ground_per_km
             );

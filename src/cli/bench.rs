@@ -237,7 +237,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             bar.finish_and_clear();
             let secs = start.elapsed().as_secs_f64();
             if json {
-                println!(
+                outln!(
                     "{}",
                     serde_json::to_string_pretty(&json!({
                         "benchmark": "mie-coarse-water", "wavelengths": n, "angles": grid.len(),
@@ -246,7 +246,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     }))?
                 );
             } else {
-                println!(
+                outln!(
                     "mie coarse water mode (r_median 4 um, sigma 0.55), {n} wavelengths 400-800 nm, {} angles: {secs:.2} s on {threads} threads ({:.3} s per wavelength, {nodes} radius nodes in all)",
                     grid.len(),
                     secs / n as f64
@@ -257,7 +257,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
         BenchCommand::Spectral { atmosphere, spp } => {
             let atm = Atmosphere::load(&atmosphere).map_err(anyhow::Error::new).with_context(|| format!("{}", atmosphere.display()))?;
             let cache = sky::mie::MieCache::from_env();
-            println!("colour noise per second, {} ({} directions, sun at 60 deg, {spp} spp, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
+            outln!("colour noise per second, {} ({} directions, sun at 60 deg, {spp} spp, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
             let mut results = Vec::new();
             for (name, ws) in [("luminance", WavelengthSampling::Luminance), ("tristimulus", WavelengthSampling::Tristimulus), ("hero", WavelengthSampling::Hero)] {
                 let settings = Settings {
@@ -276,12 +276,12 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     .map(|p| (0..3).map(|c| (p.xyz_stderr[c] / p.xyz[c]).powi(2)).sum::<f64>())
                     .sum::<f64>()
                     / img.pixels.len() as f64;
-                println!("  {name:<12} {secs:>7.2} s   mean Σ(rel. se)² {noise:.3e}   noise x time {:.3e}", noise * secs);
+                outln!("  {name:<12} {secs:>7.2} s   mean Σ(rel. se)² {noise:.3e}   noise x time {:.3e}", noise * secs);
                 results.push((name, noise * secs));
             }
             let best = results.iter().cloned().fold(("", f64::INFINITY), |a, b| if b.1 < a.1 { b } else { a });
             for (name, v) in &results {
-                println!("  {name:<12} {:.2}x the colour noise per second of {}", v / best.1, best.0);
+                outln!("  {name:<12} {:.2}x the colour noise per second of {}", v / best.1, best.0);
             }
             Ok(ExitCode::SUCCESS)
         }
@@ -297,11 +297,11 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let den = rend::denoise::Denoise::default().apply(&noisy);
             let (e_raw, c_raw, b_raw) = image_error(&noisy, &reference);
             let (e_den, c_den, b_den) = image_error(&den, &reference);
-            println!("denoiser, {} at {spp} spp against {reference_spp} spp (48x24, sun 5 deg high):", atmosphere.display());
-            println!("  noisy:    Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_raw, c_raw, b_raw);
-            println!("  denoised: Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_den, c_den, b_den);
+            outln!("denoiser, {} at {spp} spp against {reference_spp} spp (48x24, sun 5 deg high):", atmosphere.display());
+            outln!("  noisy:    Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_raw, c_raw, b_raw);
+            outln!("  denoised: Y relative RMSE {:.4}, chromaticity RMS error {:.5}, mean Y bias {:+.4}", e_den, c_den, b_den);
             let used = reference.pixels.iter().filter(|r| r.xyz[1] > 0.0 && r.xyz_stderr[1] <= 0.05 * r.xyz[1]).count();
-            println!("  ({used} of {} pixels compared: those where the reference's own Y standard error is below 5 %)", reference.pixels.len());
+            outln!("  ({used} of {} pixels compared: those where the reference's own Y standard error is below 5 %)", reference.pixels.len());
             Ok(ExitCode::SUCCESS)
         }
         BenchCommand::Render { atmosphere, spp, naive_spp, json } => {
@@ -319,7 +319,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                 })
                 .collect();
             if json {
-                println!(
+                outln!(
                     "{}",
                     serde_json::to_string_pretty(&json!({
                         "benchmark": "render-efficiency", "atmosphere": atmosphere.display().to_string(),
@@ -331,13 +331,13 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                     }))?
                 );
             } else {
-                println!("render efficiency, {} ({} directions at 550 nm, sun at 60 deg, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
-                println!("  shipped: {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", full.paths / full.seconds, t_full);
-                println!("  naive:   {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", naive.paths / naive.seconds, t_naive);
-                println!("  speed-up of the shipped estimator: {:.0}x (a lower bound: the naive estimator lit {} of {} directions, through the sun's disk only)", t_naive / t_full, naive.mean.iter().filter(|m| **m > 0.0).count(), BENCH_DIRECTIONS.len());
-                println!("  {:>10} {:>10} {:>14} {:>10} {:>14} {:>10} {:>8}", "zenith", "azimuth", "shipped", "rel.se", "naive", "rel.se", "z");
+                outln!("render efficiency, {} ({} directions at 550 nm, sun at 60 deg, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
+                outln!("  shipped: {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", full.paths / full.seconds, t_full);
+                outln!("  naive:   {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", naive.paths / naive.seconds, t_naive);
+                outln!("  speed-up of the shipped estimator: {:.0}x (a lower bound: the naive estimator lit {} of {} directions, through the sun's disk only)", t_naive / t_full, naive.mean.iter().filter(|m| **m > 0.0).count(), BENCH_DIRECTIONS.len());
+                outln!("  {:>10} {:>10} {:>14} {:>10} {:>14} {:>10} {:>8}", "zenith", "azimuth", "shipped", "rel.se", "naive", "rel.se", "z");
                 for (i, (zen, az)) in BENCH_DIRECTIONS.iter().enumerate() {
-                    println!(
+                    outln!(
                         "  {:>10} {:>10} {:>14.6e} {:>10.4} {:>14.6e} {:>10.4} {:>8.2}",
                         zen,
                         az,
@@ -400,14 +400,14 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                 "one_single_thread_worker_s": t_one, "two_single_thread_workers_s": t_two, "scaling_2_vs_1": t_one / t_two,
             });
             if json {
-                println!("{}", serde_json::to_string_pretty(&v)?);
+                outln!("{}", serde_json::to_string_pretty(&v)?);
             } else {
-                println!("farm benchmark, {} {w}x{h} at {spp} spp, {threads} threads (one run, fastest of {rounds} rounds; workers warmed on the job)", atmosphere.display());
-                println!("  plain local render (no coordinator)   {t_plain:>8.2} s");
-                println!("  embedded worker through the farm path {t_embedded:>8.2} s  overhead {:+.1} %", 100.0 * (t_embedded / t_plain - 1.0));
-                println!("  one sky worker process over loopback  {t_remote:>8.2} s  overhead {:+.1} %", 100.0 * (t_remote / t_plain - 1.0));
-                println!("  one single-thread worker              {t_one:>8.2} s");
-                println!("  two single-thread workers             {t_two:>8.2} s  speed-up {:.2}x", t_one / t_two);
+                outln!("farm benchmark, {} {w}x{h} at {spp} spp, {threads} threads (one run, fastest of {rounds} rounds; workers warmed on the job)", atmosphere.display());
+                outln!("  plain local render (no coordinator)   {t_plain:>8.2} s");
+                outln!("  embedded worker through the farm path {t_embedded:>8.2} s  overhead {:+.1} %", 100.0 * (t_embedded / t_plain - 1.0));
+                outln!("  one sky worker process over loopback  {t_remote:>8.2} s  overhead {:+.1} %", 100.0 * (t_remote / t_plain - 1.0));
+                outln!("  one single-thread worker              {t_one:>8.2} s");
+                outln!("  two single-thread workers             {t_two:>8.2} s  speed-up {:.2}x", t_one / t_two);
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -79,14 +79,14 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
                 "radius_nodes": b.radius_nodes,
                 "angles_deg": a.angles_deg, "phase_sr_inv": b.phase_sr_inv,
             });
-            println!("{}", serde_json::to_string_pretty(&v)?);
+            outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
-            println!("log-normal number distribution: r_median {r} um, sigma {sigma} (GSD {:.4}), m = {}{:+}i, {w} nm", sigma.exp(), a.m.re, -a.m.im);
-            println!("  C_ext {:.6e} um^2   C_sca {:.6e} um^2   C_abs {:.6e} um^2", b.c_ext_um2, b.c_sca_um2, b.c_ext_um2 - b.c_sca_um2);
-            println!("  single-scattering albedo {:.6}   g {:.6}   ({} radius nodes)", b.single_scattering_albedo(), b.g, b.radius_nodes);
-            println!("  {:>9}  {:>14}", "angle_deg", "phase_sr_inv");
+            outln!("log-normal number distribution: r_median {r} um, sigma {sigma} (GSD {:.4}), m = {}{:+}i, {w} nm", sigma.exp(), a.m.re, -a.m.im);
+            outln!("  C_ext {:.6e} um^2   C_sca {:.6e} um^2   C_abs {:.6e} um^2", b.c_ext_um2, b.c_sca_um2, b.c_ext_um2 - b.c_sca_um2);
+            outln!("  single-scattering albedo {:.6}   g {:.6}   ({} radius nodes)", b.single_scattering_albedo(), b.g, b.radius_nodes);
+            outln!("  {:>9}  {:>14}", "angle_deg", "phase_sr_inv");
             for (t, p) in a.angles_deg.iter().zip(&b.phase_sr_inv) {
-                println!("  {t:>9}  {p:>14.6e}");
+                outln!("  {t:>9}  {p:>14.6e}");
             }
         }
         return Ok(ExitCode::SUCCESS);
@@ -125,17 +125,17 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
             v["c_ext_um2"] = json!(r.q_ext * area);
             v["c_sca_um2"] = json!(r.q_sca * area);
         }
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?);
     } else {
-        println!("sphere: x = {x}, m = {}{:+}i", a.m.re, -a.m.im);
-        println!("  Q_ext {:.8}   Q_sca {:.8}   Q_abs {:.8}   Q_back {:.8}   g {:.8}", r.q_ext, r.q_sca, r.q_abs(), r.q_back, r.g);
+        outln!("sphere: x = {x}, m = {}{:+}i", a.m.re, -a.m.im);
+        outln!("  Q_ext {:.8}   Q_sca {:.8}   Q_abs {:.8}   Q_back {:.8}   g {:.8}", r.q_ext, r.q_sca, r.q_abs(), r.q_back, r.g);
         if let Some(rad) = radius_um {
             let area = PI * rad * rad;
-            println!("  radius {rad} um: C_ext {:.6e} um^2   C_sca {:.6e} um^2", r.q_ext * area, r.q_sca * area);
+            outln!("  radius {rad} um: C_ext {:.6e} um^2   C_sca {:.6e} um^2", r.q_ext * area, r.q_sca * area);
         }
-        println!("  {:>9}  {:>26}  {:>26}  {:>14}", "angle_deg", "S1", "S2", "phase_sr_inv");
+        outln!("  {:>9}  {:>26}  {:>26}  {:>14}", "angle_deg", "S1", "S2", "phase_sr_inv");
         for i in 0..mus.len() {
-            println!(
+            outln!(
                 "  {:>9}  {:>12.5e}{:+12.5e}i  {:>12.5e}{:+12.5e}i  {:>14.6e}",
                 a.angles_deg[i], r.s1[i].re, r.s1[i].im, r.s2[i].re, r.s2[i].im, phase[i]
             );

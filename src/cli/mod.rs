@@ -1,5 +1,18 @@
 //! The `sky` command line: argument definitions and dispatch.
 
+/// `println!` that ends the program quietly, with exit code 0, when the
+/// reader of stdout has gone away (`sky mie ... | head -2`: a closed pipe),
+/// as ripgrep does, and with a message and exit code 1 on any other write
+/// error, instead of panicking.
+macro_rules! outln {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        if let Err(e) = writeln!(std::io::stdout().lock(), $($arg)*) {
+            $crate::cli::stdout_failed(e);
+        }
+    }};
+}
+
 mod atmosphere;
 mod bench;
 mod mie;
@@ -39,7 +52,9 @@ enum Command {
     BakeLuts(NotYet),
     /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
     Preview(NotYet),
-    /// Validate and inspect atmosphere files
+    /// Validate and inspect atmosphere files (TOML; a file without a [sun]
+    /// table gets the shipped ASTM G173-03 extraterrestrial sun with a 0.533
+    /// degree disk)
     #[command(subcommand)]
     Atmosphere(atmosphere::AtmosphereCommand),
     /// Mie scattering by one sphere or a log-normal size distribution
@@ -71,6 +86,15 @@ fn not_yet(name: &str, issue: Option<u32>) -> anyhow::Result<ExitCode> {
     let tracked = issue.map(|i| format!(" (tracked in issue #{i})")).unwrap_or_default();
     eprintln!("sky {name}: not implemented yet{tracked}; no output was written");
     Ok(ExitCode::from(EXIT_USAGE))
+}
+
+/// What a failed write to stdout does (see `outln!`).
+pub fn stdout_failed(e: std::io::Error) -> ! {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        std::process::exit(0);
+    }
+    eprintln!("error: writing to stdout: {e}");
+    std::process::exit(EXIT_INVALID as i32)
 }
 
 /// Parses the command line and runs it.

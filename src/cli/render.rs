@@ -44,7 +44,8 @@ enum Sampling {
 #[derive(clap::Args)]
 #[command(after_help = "Units: X, Y, Z are CIE 1931 tristimulus values of the sky radiance times 683 lm/W \
 (Y is luminance in cd/m^2); spectral channels are radiance in W m^-2 sr^-1 nm^-1; stderr.* channels are \
-the per-pixel standard errors of the mean.\n\nExamples:\n  sky render atmospheres/clear.toml --camera fisheye --size 256x256 \
+the per-pixel standard errors of the mean. An atmosphere file without a [sun] table is lit by the shipped \
+ASTM G173-03 extraterrestrial sun with a 0.533 degree disk.\n\nExamples:\n  sky render atmospheres/clear.toml --camera fisheye --size 256x256 \
 --sun-zenith-deg 80 --spp 64 --out sky.exr --png sky.png\n  sky render atmospheres/hazed.toml --camera directions --directions dirs.csv \
 --sun-zenith-deg 60 --spectral-nm 450,550,650 --spp 1000 --json")]
 pub struct RenderArgs {
@@ -403,6 +404,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let farm_stats = outcome.stats;
     let render_s = t0.elapsed().as_secs_f64();
     let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
+    let paths_cut: u64 = image.pixels.iter().map(|p| p.paths_cut as u64).sum();
     let samples = taken * (1 + settings.spectral_nm.len()) as f64;
     let camera_desc = match &settings.camera {
         Camera::Equirect => "equirect".to_string(),
@@ -455,6 +457,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             "sun_zenith_deg": a.sun_zenith_deg, "sun_azimuth_deg": a.sun_azimuth_deg,
             "prepare_seconds": prep_s, "render_seconds": render_s,
             "paths_per_second": samples / render_s.max(1e-9),
+            "paths_cut": paths_cut,
+            "y_relative_stderr": relative_stderr_summary(&image),
             "spectral_nm": settings.spectral_nm,
             "farm": farm_stats,
         });
@@ -469,9 +473,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 }))
                 .collect::<Vec<_>>());
         }
-        println!("{}", serde_json::to_string_pretty(&v)?);
+        outln!("{}", serde_json::to_string_pretty(&v)?);
     } else if a.json_progress {
-        println!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
+        outln!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
     } else {
         eprintln!(
             "rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
@@ -483,5 +487,29 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             prep_s
         );
     }
+    if paths_cut > 0 && !a.json {
+        eprintln!("sky render: warning: {paths_cut} paths were cut at the limit of {} vertices (the image is biased low where they were)", render::tracer::MAX_VERTICES);
+    }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Median, 90th percentile and maximum over the lit pixels of the relative
+/// standard error of Y (of the first spectral line without XYZ), and the
+/// largest Y: how converged a render is, at a glance.
+fn relative_stderr_summary(image: &render::Image) -> serde_json::Value {
+    let mut rel: Vec<f64> = Vec::new();
+    let mut y_max: f64 = 0.0;
+    for p in &image.pixels {
+        let (v, se) = if p.xyz[1] > 0.0 { (p.xyz[1], p.xyz_stderr[1]) } else { (p.spectral.first().copied().unwrap_or(0.0), p.spectral_stderr.first().copied().unwrap_or(0.0)) };
+        if v > 0.0 {
+            rel.push(se / v);
+            y_max = y_max.max(v);
+        }
+    }
+    if rel.is_empty() {
+        return serde_json::Value::Null;
+    }
+    rel.sort_by(f64::total_cmp);
+    let at = |q: f64| rel[((rel.len() - 1) as f64 * q).round() as usize];
+    json!({ "median": at(0.5), "p90": at(0.9), "max": at(1.0), "largest_value": y_max })
 }

@@ -260,7 +260,7 @@ async fn serve(shared: Arc<Shared>, addr: SocketAddr, tls: Option<tonic::transpo
     if let Some(t) = tls {
         builder = builder.tls_config(t).context("TLS configuration")?;
     }
-    println!("listening on {local}");
+    outln!("listening on {local}");
     eprintln!("sky worker {name}: listening on {local} with {} threads", shared.config.threads);
     use std::io::Write;
     let _ = std::io::stdout().flush();

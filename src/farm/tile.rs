@@ -11,8 +11,8 @@ pub enum TileError {
     Job { theirs: String, ours: String },
     #[error("tile covers columns {first}+{columns} of task {task}, the task asked for {want_first}+{want_columns} of task {want_task}")]
     Columns { first: u32, columns: u32, task: u64, want_first: u32, want_columns: u32, want_task: u64 },
-    #[error("tile is {got} values and {got_samples} sample counts, expected {want} and {want_samples} ({columns} columns x {height} rows, {lines} spectral lines)")]
-    Size { got: usize, got_samples: usize, want: usize, want_samples: usize, columns: u32, height: u32, lines: u32 },
+    #[error("tile is {got} values, {got_samples} sample counts and {got_cut} cut-path counts, expected {want}, {want_samples} and {want_samples} ({columns} columns x {height} rows, {lines} spectral lines)")]
+    Size { got: usize, got_samples: usize, got_cut: usize, want: usize, want_samples: usize, columns: u32, height: u32, lines: u32 },
     #[error("tile value {index} is {value}: not a finite, non-negative radiance")]
     Value { index: usize, value: f64 },
     #[error("tile reports {samples} samples for a pixel, more than the job's {spp} spp")]
@@ -29,6 +29,7 @@ pub fn values_per_pixel(lines: usize) -> usize {
 pub fn encode(job_hash: &str, task_id: u64, first_column: u32, height: u32, lines: usize, columns: &[Vec<PixelResult>]) -> proto::Tile {
     let mut values = Vec::with_capacity(columns.len() * height as usize * values_per_pixel(lines));
     let mut samples = Vec::with_capacity(columns.len() * height as usize);
+    let mut paths_cut = Vec::with_capacity(columns.len() * height as usize);
     for col in columns {
         for p in col {
             values.extend_from_slice(&p.xyz);
@@ -37,9 +38,10 @@ pub fn encode(job_hash: &str, task_id: u64, first_column: u32, height: u32, line
             values.extend_from_slice(&p.spectral);
             values.extend_from_slice(&p.spectral_stderr);
             samples.push(p.samples);
+            paths_cut.push(p.paths_cut);
         }
     }
-    proto::Tile { job_hash: job_hash.to_string(), task_id, first_column, columns: columns.len() as u32, height, spectral_lines: lines as u32, values, samples }
+    proto::Tile { job_hash: job_hash.to_string(), task_id, first_column, columns: columns.len() as u32, height, spectral_lines: lines as u32, values, samples, paths_cut }
 }
 
 /// What the coordinator expects of a tile.
@@ -72,10 +74,11 @@ pub fn decode(tile: &proto::Tile, want: &Expect) -> Result<Vec<Vec<PixelResult>>
     let lines = want.lines as usize;
     let per = values_per_pixel(lines);
     let pixels = want.columns as usize * want.height as usize;
-    if tile.height != want.height || tile.spectral_lines != want.lines || tile.values.len() != pixels * per || tile.samples.len() != pixels {
+    if tile.height != want.height || tile.spectral_lines != want.lines || tile.values.len() != pixels * per || tile.samples.len() != pixels || tile.paths_cut.len() != pixels {
         return Err(TileError::Size {
             got: tile.values.len(),
             got_samples: tile.samples.len(),
+            got_cut: tile.paths_cut.len(),
             want: pixels * per,
             want_samples: pixels,
             columns: want.columns,
@@ -102,6 +105,7 @@ pub fn decode(tile: &proto::Tile, want: &Expect) -> Result<Vec<Vec<PixelResult>>
                 spectral: v[9..9 + lines].to_vec(),
                 spectral_stderr: v[9 + lines..9 + 2 * lines].to_vec(),
                 samples: tile.samples[i],
+                paths_cut: tile.paths_cut[i],
             });
         }
         out.push(col);
@@ -114,7 +118,7 @@ mod tests {
     use super::*;
 
     fn px(v: f64) -> PixelResult {
-        PixelResult { xyz: [v, v + 1.0, v + 2.0], xyz_direct: [0.0; 3], xyz_stderr: [0.1; 3], spectral: vec![v], spectral_stderr: vec![0.01], samples: 8 }
+        PixelResult { xyz: [v, v + 1.0, v + 2.0], xyz_direct: [0.0; 3], xyz_stderr: [0.1; 3], spectral: vec![v], spectral_stderr: vec![0.01], samples: 8, paths_cut: 0 }
     }
 
     #[test]

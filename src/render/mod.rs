@@ -13,6 +13,7 @@
 //! 683 lm/W, so Y is luminance in cd m⁻²; spectral channels are radiance in
 //! W m⁻² sr⁻¹ nm⁻¹.
 
+pub mod bands;
 pub mod camera;
 pub mod denoise;
 pub mod guide;
@@ -24,7 +25,7 @@ pub mod tracer;
 
 use crate::atmosphere::Atmosphere;
 use crate::mie::MieCache;
-use crate::spectrum::Cmf;
+pub use bands::{Bands, HeroSet, HERO_N};
 use camera::Camera;
 use glam::DVec3;
 use medium::{ColumnTable, Medium, Spectral};
@@ -42,8 +43,8 @@ pub enum WavelengthSampling {
     Luminance,
     /// ∝ (x̄ + ȳ + z̄) E: less noise in X and Z.
     Tristimulus,
-    /// Hero wavelengths (Wilkie et al. 2014): a hero band drawn ∝ (x̄ + ȳ
-    /// + z̄) E and three companions spaced a quarter of the range apart,
+    /// Hero wavelengths (Wilkie et al. 2014): four bands drawn ∝ (x̄ + ȳ +
+    /// z̄) E at stratified offsets (see `bands`), one of them the hero,
     /// combined by spectral multiple importance sampling.
     Hero,
 }
@@ -110,75 +111,12 @@ impl Settings {
     }
 }
 
-/// The visible range split into bands, with their colour weights.
-#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
-pub struct Bands {
-    pub centre_nm: Vec<f64>,
-    /// W_b: 683 Σ E(λ) cmf(λ) over the band's 1 nm samples.
-    pub weight: Vec<[f64; 3]>,
-    pub ground_albedo: Vec<f64>,
-    pub pdf: Vec<f64>,
-    cdf: Vec<f64>,
-}
-
-impl Bands {
-    pub fn new(atm: &Atmosphere, band_nm: f64, sampling: WavelengthSampling) -> Bands {
-        let cmf = Cmf::cie1931();
-        let n = ((cmf.wavelength_nm.len() as f64 - 1.0) / band_nm).floor().max(1.0) as usize;
-        let mut sums = vec![(0.0, [0.0; 3], 0.0, 0usize); n];
-        for (i, &l) in cmf.wavelength_nm.iter().enumerate() {
-            let b = (((l - cmf.wavelength_nm[0]) / band_nm) as usize).min(n - 1);
-            let e = atm.sun.irradiance_w_m2_nm.eval(l);
-            let s = &mut sums[b];
-            s.0 += l;
-            s.1[0] += KM_LM_PER_W * e * cmf.x_bar[i];
-            s.1[1] += KM_LM_PER_W * e * cmf.y_bar[i];
-            s.1[2] += KM_LM_PER_W * e * cmf.z_bar[i];
-            s.2 += atm.ground_albedo.eval(l);
-            s.3 += 1;
-        }
-        let centre_nm = sums.iter().map(|s| s.0 / s.3 as f64).collect();
-        let weight: Vec<[f64; 3]> = sums.iter().map(|s| s.1).collect();
-        let ground_albedo = sums.iter().map(|s| s.2 / s.3 as f64).collect();
-        let raw: Vec<f64> = weight
-            .iter()
-            .map(|w| match sampling {
-                WavelengthSampling::Luminance => w[1],
-                WavelengthSampling::Tristimulus | WavelengthSampling::Hero => w[0] + w[1] + w[2],
-            })
-            .collect();
-        let total: f64 = raw.iter().sum();
-        let pdf: Vec<f64> = raw.iter().map(|r| r / total).collect();
-        let mut cdf = Vec::with_capacity(n);
-        let mut acc = 0.0;
-        for p in &pdf {
-            acc += p;
-            cdf.push(acc);
-        }
-        Bands { centre_nm, weight, ground_albedo, pdf, cdf }
-    }
-
-    pub fn len(&self) -> usize {
-        self.pdf.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.pdf.is_empty()
-    }
-
-    pub fn sample(&self, u: f64) -> usize {
-        self.cdf.partition_point(|&c| c <= u * self.cdf[self.cdf.len() - 1]).min(self.cdf.len() - 1)
-    }
-}
-
 /// The prepared scene: medium, per-band and per-line optics. It travels in
 /// farm jobs (postcard-encoded), so every worker renders with the very same
 /// numbers whatever its platform's maths library.
 #[derive(serde::Serialize, serde::Deserialize)]
 pub struct Scene {
     pub medium: Medium,
-    /// For hero sampling: the shared majorant of the set whose hero is band b.
-    pub hero_majorant: Vec<Vec<f64>>,
     pub columns: ColumnTable,
     pub bands: Bands,
     pub band_optics: Vec<Spectral>,
@@ -213,15 +151,7 @@ impl Scene {
                 o
             })
             .collect();
-        let n = band_optics.len();
-        let hero_majorant = if s.wavelength_sampling == WavelengthSampling::Hero {
-            (0..n)
-                .map(|b| hero::shared_majorant(std::array::from_fn(|j| band_optics[(b + j * n / hero::HERO_N) % n].majorant.as_slice())))
-                .collect()
-        } else {
-            Vec::new()
-        };
-        Scene { medium, hero_majorant, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
+        Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
     }
 
     /// How many wavelengths `new` evaluates (for a progress bar).
@@ -248,6 +178,10 @@ pub struct PixelResult {
     pub spectral_stderr: Vec<f64>,
     /// Samples taken (fewer than `spp` where adaptive sampling stopped early).
     pub samples: u32,
+    /// Paths cut at the vertex limit (`tracer::MAX_VERTICES`), over every
+    /// estimate of the pixel (XYZ and spectral lines): 0 unless a medium
+    /// traps light for longer than any basis sky does.
+    pub paths_cut: u32,
 }
 
 /// Running sums for a mean and its standard error.
@@ -297,7 +231,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     let mut xyz = [Moments::default(); 3];
     let mut direct = [0.0f64; 3];
     let mut lines = vec![Moments::default(); nl];
-    let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl], samples: 0 };
+    let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl], samples: 0, paths_cut: 0 };
     let jitter = s.camera.jitters();
     let centre = s.camera.direction(x as f64 + 0.5, y as f64 + 0.5, s.width, s.height);
     if centre.is_none() && !jitter {
@@ -335,6 +269,9 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     let mut shift = Rng::new(s.seed, pixel as u64, u64::MAX);
     let (s_band, s_x, s_y) = (shift.uniform(), shift.uniform(), shift.uniform());
     let mut taken = 0u32;
+    // The shared majorant of the current hero set (reused, not reallocated).
+    let mut majorant = Vec::new();
+    let mut cut = 0u32;
     for k in 0..s.spp as u64 {
         if k % 64 == 0 && cancel.load(Ordering::Relaxed) {
             break;
@@ -356,29 +293,34 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
             let mut rng = Rng::new(s.seed, pixel as u64, k);
             let kf = k as f64;
             let (jx, jy) = if jitter { ((s_x + kf * R2_A1).fract(), (s_y + kf * R2_A2).fract()) } else { (0.5, 0.5) };
-            let b = scene.bands.sample((s_band + kf * R1_A).fract());
+            let u_band = (s_band + kf * R1_A).fract();
             let dir = s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height);
-            if let (WavelengthSampling::Hero, Some(d)) = (s.wavelength_sampling, dir) {
-                any = true;
-                let n = scene.bands.len();
-                let set: [usize; hero::HERO_N] = std::array::from_fn(|j| (b + j * n / hero::HERO_N) % n);
-                let ht = hero::HeroTracer::new(std::array::from_fn(|j| &tracers_band[set[j]]), &scene.hero_majorant[b]);
-                let sel = std::array::from_fn(|j| scene.bands.pdf[set[j]]);
-                let (ld, ls) = ht.radiance(origin, d, sel, guide, &mut rng);
-                for c in 0..3 {
-                    let mut v = 0.0;
-                    for j in 0..hero::HERO_N {
-                        let w = scene.bands.weight[set[j]][c];
-                        v += (ld[j] + ls[j]) * w;
-                        direct[c] += ld[j] * w;
-                    }
-                    xyz[c].add(v);
-                }
-            } else {
-            match dir {
-                Some(d) => {
+            match (s.wavelength_sampling, dir) {
+                (WavelengthSampling::Hero, Some(d)) => {
                     any = true;
-                    let (ld, ls) = tracers_band[b].radiance_parts(origin, d, guide, &mut rng);
+                    let set = scene.bands.hero_set(u_band);
+                    let ts: [&Tracer; HERO_N] = std::array::from_fn(|j| &tracers_band[set.band[j]]);
+                    hero::shared_majorant_into(std::array::from_fn(|j| ts[j].spectral.majorant.as_slice()), &mut majorant);
+                    let ht = hero::HeroTracer::new(ts, &majorant);
+                    let path = ht.radiance(origin, d, &set, guide, &mut rng);
+                    let (ld, ls) = (path.direct, path.scattered);
+                    cut += path.cut as u32;
+                    for c in 0..3 {
+                        let mut v = 0.0;
+                        for j in 0..HERO_N {
+                            let w = scene.bands.weight[set.band[j]][c];
+                            v += (ld[j] + ls[j]) * w;
+                            direct[c] += ld[j] * w;
+                        }
+                        xyz[c].add(v);
+                    }
+                }
+                (_, Some(d)) => {
+                    any = true;
+                    let b = scene.bands.sample(u_band);
+                    let path = tracers_band[b].radiance_parts(origin, d, guide, &mut rng);
+                    let (ld, ls) = (path.direct, path.scattered);
+                    cut += path.cut as u32;
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
                     for c in 0..3 {
@@ -386,12 +328,11 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
                         direct[c] += ld * w[c] / p;
                     }
                 }
-                None => {
+                (_, None) => {
                     for m in &mut xyz {
                         m.add(0.0);
                     }
                 }
-            }
             }
         }
         for (j, t) in tracers_line.iter().enumerate() {
@@ -400,8 +341,9 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
                     any = true;
-                    let (ld, ls) = t.radiance_parts(origin, d, guide, &mut rng);
-                    lines[j].add(ld + ls);
+                    let path = t.radiance_parts(origin, d, guide, &mut rng);
+                    cut += path.cut as u32;
+                    lines[j].add(path.direct + path.scattered);
                 }
                 None => lines[j].add(0.0),
             }
@@ -420,6 +362,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
         empty.spectral_stderr[j] = lines[j].stderr();
     }
     empty.samples = taken;
+    empty.paths_cut = cut;
     empty
 }
 

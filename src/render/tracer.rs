@@ -10,7 +10,7 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
-use super::guide::{RayGuide, SHADOW_TRANSMITTANCE};
+use super::guide::RayGuide;
 use super::medium::{ColumnPath, ColumnTable, Medium, Phase, Spectral};
 use super::rng::Rng;
 use crate::atmosphere::Geometry;
@@ -19,8 +19,38 @@ use std::f64::consts::PI;
 
 /// Nudge past a boundary, km.
 pub(crate) const EPS_KM: f64 = 1e-9;
-/// Paths longer than this are cut (Russian roulette ends them long before).
-const MAX_BOUNCES: usize = 10_000;
+/// Paths with more vertices than this are cut, and counted
+/// ([`PathSample::cut`], `paths_cut` in a render's JSON). Far beyond what
+/// the thickest basis sky needs: under a cloud of optical depth 60 with
+/// g 0.85 (transport optical depth 9) a diffusing path takes of the order
+/// of a thousand scatterings, and Russian roulette, on the throughput only,
+/// does not shorten it.
+pub const MAX_VERTICES: usize = 100_000;
+
+/// One path's estimate: the directly seen sun's disk, everything scattered
+/// or reflected, and whether the path was cut at [`MAX_VERTICES`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PathSample<T> {
+    pub direct: T,
+    pub scattered: T,
+    pub cut: bool,
+}
+
+/// The survival probability of Russian roulette on the path throughput
+/// `beta` relative to `beta_ref`, its value after the first vertex: paths
+/// whose throughput has not fallen are never killed (a fixed per-vertex
+/// kill rate would end nearly every path inside a thick cloud and weight
+/// the survivors by 0.95^-n). Survivors are weighted by 1 / q (unbiased).
+#[inline]
+pub(crate) fn survival_probability(beta: f64, beta_ref: f64) -> f64 {
+    if !(beta_ref > 0.0) || !(beta > 0.0) {
+        return 0.0;
+    }
+    (beta / beta_ref).min(1.0)
+}
+
+/// Vertices a path has before Russian roulette starts.
+pub(crate) const ROULETTE_FROM_DEPTH: usize = 3;
 
 /// How a flight ended.
 enum Flight {
@@ -127,26 +157,108 @@ impl<'a> Tracer<'a> {
         best.map(|(i, _)| i)
     }
 
-    /// Draws a scattered direction at a vertex whose local sampling is
-    /// `local` (returning the direction), mixed with the sun lobe; returns
-    /// the direction and the density of the lobe strategy there (0 when
-    /// there is no lobe). The caller divides by (1 − α) p_local + α p_lobe.
+    /// The probability of taking the lobe technique's sample at a vertex
+    /// whose sun transmittance is `t_sun` (see [`Tracer::lobe_next_event`]):
+    /// [`LOBE_PROBABILITY`] times min(1, t_sun), so no flight is spent
+    /// where the sun is out of sight (inside a thick cloud, in the Earth's
+    /// shadow), where the next vertex would not see it either. It depends
+    /// only on the vertex, as the multiple importance sampling requires.
     #[inline]
-    pub(crate) fn guided(&self, rng: &mut Rng, local: impl FnOnce(&mut Rng) -> DVec3) -> (DVec3, f64) {
+    pub(crate) fn lobe_alpha_at(&self, t_sun: f64) -> f64 {
         match self.lobe {
-            None => (local(rng), 0.0),
-            Some((i, alpha)) => {
-                let phase = &self.spectral.phase[i];
-                let d = if rng.uniform() < alpha { self.sample_phase(phase, self.sun_dir, rng) } else { local(rng) };
-                (d, phase.eval(d.dot(self.sun_dir)))
+            Some((_, alpha)) if t_sun > 0.0 => alpha * t_sun.min(1.0),
+            _ => 0.0,
+        }
+    }
+
+    /// The lobe component's phase function toward the sun for a direction
+    /// `w` (the lobe technique's density), 0 without a lobe.
+    #[inline]
+    pub(crate) fn lobe_pdf(&self, w: DVec3) -> f64 {
+        self.lobe.map_or(0.0, |(i, _)| self.spectral.phase[i].eval(w.dot(self.sun_dir)))
+    }
+
+    /// Σ_i σ_s,i(z) p_i(μ) and Σ_i σ_s,i(z): the scattering coefficient
+    /// weighted by each component's phase function at μ, and unweighted.
+    #[inline]
+    pub(crate) fn scattering_at(&self, z_km: f64, mu: f64) -> (f64, f64) {
+        let sp = self.spectral;
+        let (mut weighted, mut total) = (0.0, 0.0);
+        for i in 0..sp.extinction.len() {
+            let s = sp.extinction[i] * self.medium.density(i, z_km) * sp.albedo[i];
+            if s > 0.0 {
+                weighted += s * sp.phase[i].eval(mu);
+                total += s;
+            }
+        }
+        (weighted, total)
+    }
+
+    /// The lobe technique of the sun's next-event estimate at the *next*
+    /// vertex. The sunlight single-scattered toward a vertex x along ω is
+    /// ∫ f(ω) g(ω) dω, with f the vertex's scattering (phase function or
+    /// cosine lobe, density `local_pdf` as sampled) and g the next vertex's
+    /// next-event estimate; where an aerosol's or a cloud's forward peak
+    /// (p(1) ~ 10³ sr⁻¹) sees the sun, directions drawn from f seldom fall
+    /// in it and those that do carry huge estimates. Two techniques, then,
+    /// combined by the balance heuristic with their expected sample counts
+    /// (Veach 1997, §9.2): the path's own continuation ω ~ f (always; its
+    /// next vertex's sun estimate is weighted by f / (f + α p_lobe), see
+    /// [`Tracer::continuation_weight`]) and, with probability α, a direction
+    /// ω' from the lobe component's phase function centred on the sun and a
+    /// free flight along it, whose collision's sun estimate is weighted by
+    /// f / (f + α p_lobe) as well (the densities' ratio to its own sampling
+    /// and the weight multiply to that). The path itself is not changed:
+    /// its throughput never carries a lobe weight, so Russian roulette does
+    /// not kill paths that a lobe direction would have weighted down.
+    /// Returns the estimate, already times `beta`.
+    pub(crate) fn lobe_next_event(&self, x: DVec3, alpha: f64, beta: f64, local_pdf: impl Fn(DVec3) -> f64, rng: &mut Rng) -> f64 {
+        let Some((i, _)) = self.lobe else { return 0.0 };
+        if !(alpha > 0.0) || rng.uniform() >= alpha {
+            return 0.0;
+        }
+        let w = self.sample_phase(&self.spectral.phase[i], self.sun_dir, rng);
+        let f = local_pdf(w);
+        if !(f > 0.0) {
+            return 0.0;
+        }
+        let weight = f / (f + alpha * self.lobe_pdf(w));
+        match self.fly(x, w, rng) {
+            Flight::Escape => 0.0,
+            Flight::Collision(y) => {
+                let t_sun = self.transmittance_to_space(y, self.sun_dir, rng);
+                if !(t_sun > 0.0) {
+                    return 0.0;
+                }
+                let z = self.altitude(y);
+                let (sp, ss) = self.scattering_at(z, w.dot(self.sun_dir));
+                let st = self.spectral.sigma_t(self.medium, z);
+                if !(st > 0.0) || !(ss > 0.0) {
+                    return 0.0;
+                }
+                beta * weight * (ss / st) * (sp / ss) * t_sun
+            }
+            Flight::Ground(g) => {
+                let n = self.up(g);
+                let cos_s = n.dot(self.sun_dir);
+                let a = self.spectral.ground_albedo;
+                if cos_s <= 0.0 || a <= 0.0 {
+                    return 0.0;
+                }
+                beta * weight * a / PI * cos_s * self.transmittance_to_space(g + n * EPS_KM, self.sun_dir, rng)
             }
         }
     }
 
-    /// α, the probability of the lobe strategy (0 without one).
+    /// The weight of the sun's next-event estimate at the vertex a
+    /// continuation direction `w` leads to (see [`Tracer::lobe_next_event`]).
     #[inline]
-    pub(crate) fn lobe_alpha(&self) -> f64 {
-        self.lobe.map_or(0.0, |(_, a)| a)
+    pub(crate) fn continuation_weight(&self, alpha: f64, local_pdf: f64, w: DVec3) -> f64 {
+        if alpha > 0.0 {
+            local_pdf / (local_pdf + alpha * self.lobe_pdf(w))
+        } else {
+            1.0
+        }
     }
 
     pub fn with_columns(mut self, columns: &'a ColumnTable) -> Self {
@@ -544,15 +656,15 @@ impl<'a> Tracer<'a> {
     }
 
     pub fn radiance(&self, origin: DVec3, dir: DVec3, rng: &mut Rng) -> f64 {
-        let (direct, scattered) = self.radiance_parts(origin, dir, None, rng);
-        direct + scattered
+        let p = self.radiance_parts(origin, dir, None, rng);
+        p.direct + p.scattered
     }
 
     /// [`radiance`](Self::radiance) split into the sun's disk seen directly
     /// (attenuated) and everything scattered or reflected.
     /// `guide`, if any, shapes the distance of the forced first collision
     /// (see [`RayGuide`]).
-    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, guide: Option<&RayGuide>, rng: &mut Rng) -> (f64, f64) {
+    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, guide: Option<&RayGuide>, rng: &mut Rng) -> PathSample<f64> {
         let mut direct = 0.0;
         let mut l = 0.0;
         let naive = self.estimator == Estimator::Naive;
@@ -566,7 +678,13 @@ impl<'a> Tracer<'a> {
         // Whether the last vertex estimated the sunlight scattered toward
         // it along `d` (see `skylight_along`).
         let mut sun_done = false;
-        for depth in 0..MAX_BOUNCES {
+        // The weight of the sun's estimate at the next vertex: below 1 where
+        // the lobe technique of the last vertex also covers the direction
+        // `d` (see `lobe_next_event`); 1 for the camera ray.
+        let mut nee_weight = 1.0;
+        let mut beta_ref = 1.0;
+        let mut cut = false;
+        for depth in 0..MAX_VERTICES {
             // Forced collisions on the camera ray only: later bounces fly
             // analogously, so escaping paths end instead of carrying ever
             // smaller weights into Russian roulette.
@@ -595,25 +713,25 @@ impl<'a> Tracer<'a> {
                     let n = self.up(q);
                     let q = q + n * EPS_KM;
                     let mut shadowed = true;
+                    let mut t_sun = 0.0;
                     if !naive {
                         let cos_s = n.dot(self.sun_dir);
                         if cos_s > 0.0 {
-                            let t_sun = self.transmittance_to_space(q, self.sun_dir, rng);
-                            shadowed = t_sun < SHADOW_TRANSMITTANCE;
-                            l += beta * a / PI * cos_s * t_sun;
+                            t_sun = self.transmittance_to_space(q, self.sun_dir, rng);
+                            shadowed = t_sun == 0.0;
+                            l += beta * nee_weight * a / PI * cos_s * t_sun;
                         }
                     }
                     beta *= a;
-                    let (nd, p_lobe) = self.guided(rng, |r| cosine_hemisphere(n, r));
+                    let alpha = if naive { 0.0 } else { self.lobe_alpha_at(t_sun) };
+                    let cosine_pdf = |w: DVec3| n.dot(w).max(0.0) / PI;
+                    l += self.lobe_next_event(q, alpha, beta, cosine_pdf, rng);
+                    let nd = cosine_hemisphere(n, rng);
                     let cos_o = n.dot(nd);
                     if cos_o <= 0.0 {
                         break;
                     }
-                    if self.lobe.is_some() {
-                        let alpha = self.lobe_alpha();
-                        let p_local = cos_o / PI;
-                        beta *= p_local / ((1.0 - alpha) * p_local + alpha * p_lobe);
-                    }
+                    nee_weight = self.continuation_weight(alpha, cos_o / PI, nd);
                     d = nd;
                     p = q;
                     sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, rng);
@@ -653,6 +771,7 @@ impl<'a> Tracer<'a> {
                     }
                     let phase = &sp.phase[which];
                     let mut shadowed = false;
+                    let mut t_sun = 0.0;
                     if !naive {
                         // Next-event estimation with the mixture of every
                         // scatterer's phase function (weighted by its
@@ -661,7 +780,8 @@ impl<'a> Tracer<'a> {
                         // choice where a forward-peaked aerosol sees the sun.
                         // Skipped when the previous vertex estimated it.
                         let t = self.transmittance_to_space(q, self.sun_dir, rng);
-                        shadowed = t < SHADOW_TRANSMITTANCE;
+                        t_sun = t;
+                        shadowed = t == 0.0;
                         if t > 0.0 && !sun_done {
                             let mu_s = d.dot(self.sun_dir);
                             let mut p_mix = 0.0;
@@ -671,40 +791,43 @@ impl<'a> Tracer<'a> {
                                     p_mix += s * sp.phase[i].eval(mu_s);
                                 }
                             }
-                            l += beta * p_mix / sigma_s * t;
+                            l += beta * nee_weight * p_mix / sigma_s * t;
                         }
                     }
-                    let (nd, p_lobe) = self.guided(rng, |r| self.sample_phase(phase, d, r));
-                    if self.lobe.is_some() {
-                        // The local strategy's density is the mixture phase
-                        // (the scatterer choice marginalised out).
-                        let alpha = self.lobe_alpha();
-                        let mu = d.dot(nd);
-                        let mut p_mix = 0.0;
-                        for i in 0..k {
-                            let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
-                            if s > 0.0 {
-                                p_mix += s * sp.phase[i].eval(mu);
-                            }
+                    // The direction's density as sampled: the mixture phase
+                    // (the scatterer choice marginalised out).
+                    let mixture_pdf = |w: DVec3| {
+                        let (weighted, total) = self.scattering_at(z, d.dot(w));
+                        if total > 0.0 {
+                            weighted / total
+                        } else {
+                            0.0
                         }
-                        p_mix /= sigma_s;
-                        beta *= p_mix / ((1.0 - alpha) * p_mix + alpha * p_lobe);
-                    }
+                    };
+                    let alpha = if naive { 0.0 } else { self.lobe_alpha_at(t_sun) };
+                    l += self.lobe_next_event(q, alpha, beta, mixture_pdf, rng);
+                    let nd = self.sample_phase(phase, d, rng);
+                    nee_weight = if alpha > 0.0 { self.continuation_weight(alpha, mixture_pdf(nd), nd) } else { 1.0 };
                     d = nd;
                     p = q;
                     sun_done = shadowed && self.skylight && self.skylight_along(p, d, beta, &mut l, rng);
                 }
             }
-            // Russian roulette on the path throughput (unbiased).
-            if depth >= 3 {
-                let q = beta.min(0.95);
-                if rng.uniform() >= q {
-                    break;
-                }
-                beta /= q;
+            if depth == 0 {
+                beta_ref = beta;
             }
+            if depth >= ROULETTE_FROM_DEPTH {
+                let q = survival_probability(beta, beta_ref);
+                if q < 1.0 {
+                    if rng.uniform() >= q {
+                        break;
+                    }
+                    beta /= q;
+                }
+            }
+            cut = depth + 1 == MAX_VERTICES;
         }
-        (direct * self.spectral.sun_irradiance, l * self.spectral.sun_irradiance)
+        PathSample { direct: direct * self.spectral.sun_irradiance, scattered: l * self.spectral.sun_irradiance, cut }
     }
 }
 
