@@ -29,8 +29,7 @@ impl Cmf {
     pub fn cie1931() -> &'static Cmf {
         static CMF: OnceLock<Cmf> = OnceLock::new();
         CMF.get_or_init(|| {
-            let t = Table::parse(Path::new("atmospheres/data/cie1931_2deg_cmf.csv"), CMF_CSV)
-                .expect("embedded CMF table is valid");
+            let t = Table::parse(Path::new("atmospheres/data/cie1931_2deg_cmf.csv"), CMF_CSV).expect("embedded CMF table is valid");
             Cmf {
                 wavelength_nm: t.column("wavelength_nm").unwrap().to_vec(),
                 x_bar: t.column("x_bar").unwrap().to_vec(),

@@ -26,21 +26,13 @@ pub struct Table {
 impl Table {
     /// Reads a table from disk.
     pub fn read(path: &Path) -> Result<Table, TableError> {
-        let text = std::fs::read_to_string(path).map_err(|e| TableError {
-            path: path.to_path_buf(),
-            line: None,
-            message: format!("cannot read data file: {e}"),
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| TableError { path: path.to_path_buf(), line: None, message: format!("cannot read data file: {e}") })?;
         Table::parse(path, &text)
     }
 
     /// Parses table text; `path` only names the source in errors.
     pub fn parse(path: &Path, text: &str) -> Result<Table, TableError> {
-        let err = |line: usize, message: String| TableError {
-            path: path.to_path_buf(),
-            line: Some(line),
-            message,
-        };
+        let err = |line: usize, message: String| TableError { path: path.to_path_buf(), line: Some(line), message };
         let mut columns: Option<Vec<String>> = None;
         let mut data: Vec<Vec<f64>> = Vec::new();
         for (i, raw) in text.lines().enumerate() {
@@ -61,15 +53,10 @@ impl Table {
                 Some(names) => {
                     let fields: Vec<&str> = line.split(',').map(str::trim).collect();
                     if fields.len() != names.len() {
-                        return Err(err(
-                            line_no,
-                            format!("expected {} values ({}), found {}", names.len(), names.join(","), fields.len()),
-                        ));
+                        return Err(err(line_no, format!("expected {} values ({}), found {}", names.len(), names.join(","), fields.len())));
                     }
                     for (c, f) in fields.iter().enumerate() {
-                        let v: f64 = f
-                            .parse()
-                            .map_err(|_| err(line_no, format!("`{f}` is not a number (column {})", names[c])))?;
+                        let v: f64 = f.parse().map_err(|_| err(line_no, format!("`{f}` is not a number (column {})", names[c])))?;
                         if !v.is_finite() {
                             return Err(err(line_no, format!("`{f}` is not finite (column {})", names[c])));
                         }
@@ -78,11 +65,7 @@ impl Table {
                 }
             }
         }
-        let columns = columns.ok_or_else(|| TableError {
-            path: path.to_path_buf(),
-            line: None,
-            message: "no header line and no data".into(),
-        })?;
+        let columns = columns.ok_or_else(|| TableError { path: path.to_path_buf(), line: None, message: "no header line and no data".into() })?;
         if data[0].is_empty() {
             return Err(TableError { path: path.to_path_buf(), line: None, message: "table has no rows".into() });
         }
@@ -103,11 +86,7 @@ impl Table {
         let x = &self.data[0];
         for i in 1..x.len() {
             if x[i] <= x[i - 1] {
-                return Err(TableError {
-                    path: self.path.clone(),
-                    line: None,
-                    message: format!("{} must strictly increase (row {}: {} after {})", self.columns[0], i + 1, x[i], x[i - 1]),
-                });
+                return Err(TableError { path: self.path.clone(), line: None, message: format!("{} must strictly increase (row {}: {} after {})", self.columns[0], i + 1, x[i], x[i - 1]) });
             }
         }
         Ok(())

@@ -138,9 +138,25 @@ fn render_writes_exr_png_and_json() {
     let exr_path = c.path().join("sky.exr");
     let png_path = c.path().join("sky.png");
     let args = [
-        "render", "atmospheres/analytic-hg.toml", "--camera", "fisheye", "--size", "12x10", "--sun-zenith-deg", "70",
-        "--spp", "4", "--band-nm", "47", "--spectral-nm", "550", "--out", exr_path.to_str().unwrap(),
-        "--png", png_path.to_str().unwrap(), "--json",
+        "render",
+        "atmospheres/analytic-hg.toml",
+        "--camera",
+        "fisheye",
+        "--size",
+        "12x10",
+        "--sun-zenith-deg",
+        "70",
+        "--spp",
+        "4",
+        "--band-nm",
+        "47",
+        "--spectral-nm",
+        "550",
+        "--out",
+        exr_path.to_str().unwrap(),
+        "--png",
+        png_path.to_str().unwrap(),
+        "--json",
     ];
     let o = sky(&args, c.path());
     assert!(o.status.success(), "{:?}", text(&o));
@@ -270,14 +286,7 @@ fn closed_stdout_exits_quietly() {
     use std::process::Stdio;
     let c = tempfile::tempdir().unwrap();
     for args in [&["mie", "--m", "1.33-1e-7i", "--x", "10", "--angles-deg", "0,1,2,3,4,5,10,20,30,60,90,120,150,180"][..], &["atmosphere", "inspect", "atmospheres/clear.toml"][..]] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
-            .args(args)
-            .current_dir(root())
-            .env("SKY_CACHE_DIR", c.path())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(root()).env("SKY_CACHE_DIR", c.path()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
         drop(child.stdout.take());
         let o = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);

@@ -248,20 +248,21 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
         // Another protocol version in a task.
         let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
         let task = proto::RenderTask { protocol_version: 99, build_version: sky::farm::build_version(), job_hash: "x".into(), job: None, task_id: 1, first_column: 0, columns: 1 };
-        let e = c.render(task).await.err().expect("refused");
+        let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::FailedPrecondition);
         assert!(e.message().contains("farm protocol 1") && e.message().contains("protocol 99"), "{e}");
         // An oversized message (a 70 MiB data file in a job).
-        let big = proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), files: vec![proto::DataFile { name: "big.csv".into(), content: vec![b'1'; 70 << 20] }], ..Default::default() };
+        let big =
+            proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), files: vec![proto::DataFile { name: "big.csv".into(), content: vec![b'1'; 70 << 20] }], ..Default::default() };
         let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "x".into(), job: Some(big), task_id: 2, first_column: 0, columns: 1 };
         let mut big_client = c.clone().max_encoding_message_size(usize::MAX);
-        let e = big_client.render(task).await.err().expect("refused");
+        let e = big_client.render(task).await.expect_err("refused");
         assert!(matches!(e.code(), tonic::Code::ResourceExhausted | tonic::Code::OutOfRange | tonic::Code::InvalidArgument), "{e:?}");
         assert!(e.message().to_lowercase().contains("message") || e.message().contains("size") || e.message().contains("large"), "{e:?}");
         // A job that does not match its hash.
         let job = proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), ..Default::default() };
         let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "not-its-hash".into(), job: Some(job), task_id: 3, first_column: 0, columns: 1 };
-        let e = c.render(task).await.err().expect("refused");
+        let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::InvalidArgument);
         assert!(e.message().contains("hashes to"), "{e}");
     });
@@ -333,10 +334,7 @@ fn workers_speak_tls_when_given_a_certificate() {
     let (c, k) = (farm.path("cert.pem"), farm.path("key.pem"));
     farm.start("tls", &["--tls-cert", c.to_str().unwrap(), "--tls-key", k.to_str().unwrap()]);
     // A farm file with the CA and the name in the certificate.
-    let farm_toml = format!(
-        "token_file = \"token\"\n[tls]\nca = \"ca.pem\"\ndomain = \"sky-farm-test\"\n[[worker]]\nname = \"tls\"\naddress = \"{}\"\n",
-        farm.workers[0].addr
-    );
+    let farm_toml = format!("token_file = \"token\"\n[tls]\nca = \"ca.pem\"\ndomain = \"sky-farm-test\"\n[[worker]]\nname = \"tls\"\naddress = \"{}\"\n", farm.workers[0].addr);
     std::fs::write(farm.path("farm.toml"), farm_toml).unwrap();
     let mut args = render_args(&farm.path("farm.exr"));
     args.extend(["--farm".to_string(), farm.path("farm.toml").to_str().unwrap().to_string()]);
@@ -398,7 +396,7 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
         assert_eq!(e.code(), tonic::Code::Unavailable);
         assert!(e.message().starts_with("paused"), "{e}");
         // ...and new tasks are refused while paused.
-        let e = c.render(task(2, None)).await.err().expect("refused while paused");
+        let e = c.render(task(2, None)).await.expect_err("refused while paused");
         assert_eq!(e.code(), tonic::Code::Unavailable);
         assert!(e.message().contains("paused (rpc)"), "{e}");
         let r = c.control(ControlRequest { action: ControlAction::Resume as i32 }).await.unwrap().into_inner();

@@ -88,18 +88,21 @@ fn mie_lognormal_matches_dense_miepython_integration() {
         let angles = arr(&case["angles_deg"]);
         let b = mie::bulk_optics(m, &mode, w, &angles);
         let label = format!("m={m} r={} sigma={} {w} nm", mode.median_radius_um, mode.sigma);
-        for (name, a, e) in [
-            ("c_ext_um2", b.c_ext_um2, f(&case["c_ext_um2"])),
-            ("c_sca_um2", b.c_sca_um2, f(&case["c_sca_um2"])),
-            ("ssa", b.single_scattering_albedo(), f(&case["ssa"])),
-            ("g", b.g, f(&case["g"])),
-        ] {
+        for (name, a, e) in
+            [("c_ext_um2", b.c_ext_um2, f(&case["c_ext_um2"])), ("c_sca_um2", b.c_sca_um2, f(&case["c_sca_um2"])), ("ssa", b.single_scattering_albedo(), f(&case["ssa"])), ("g", b.g, f(&case["g"]))]
+        {
             assert!(rel(a, e) < 2e-3, "{label}: {name} {a} vs {e} (rel {:.2e})", rel(a, e));
         }
         let p = arr(&case["phase_sr_inv"]);
         for i in 0..angles.len() {
             let e = rel(b.phase_sr_inv[i], p[i]);
-            let tol = if angles[i] <= 60.0 { 0.01 } else if angles[i] <= 170.0 { 0.05 } else { 0.15 };
+            let tol = if angles[i] <= 60.0 {
+                0.01
+            } else if angles[i] <= 170.0 {
+                0.05
+            } else {
+                0.15
+            };
             assert!(e < tol, "{label}: phase at {} deg {} vs {} (rel {e:.2e})", angles[i], b.phase_sr_inv[i], p[i]);
         }
     }

@@ -236,10 +236,7 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
     // Daylight in an analytic atmosphere, and hazy twilight, where both
     // tracers estimate the sunlight scattered toward shadowed vertices
     // (`skylight_along`, written once for each).
-    let cases = [
-        ("analytic-hg", 65.0, vec![(0.0, 0.0), (50.0, 90.0), (80.0, 10.0), (95.0, 0.0)], 6000),
-        ("hazed", 94.0, vec![(60.0, 0.0), (82.0, 0.0), (86.0, 90.0)], 3000),
-    ];
+    let cases = [("analytic-hg", 65.0, vec![(0.0, 0.0), (50.0, 90.0), (80.0, 10.0), (95.0, 0.0)], 6000), ("hazed", 94.0, vec![(60.0, 0.0), (82.0, 0.0), (86.0, 90.0)], 3000)];
     let cache = MieCache::new(None);
     for (name, sun_zenith, dirs, spp) in cases {
         let atm = Atmosphere::load(&root().join(format!("atmospheres/{name}.toml"))).unwrap();

@@ -225,15 +225,7 @@ pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec
             return Err(LoadError { errors: vec![Located { path: path.to_path_buf(), line, message }] });
         }
     };
-    let mut ctx = Ctx {
-        path,
-        text,
-        dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
-        errors: Vec::new(),
-        hasher: blake3::Hasher::new(),
-        files,
-        read: BTreeMap::new(),
-    };
+    let mut ctx = Ctx { path, text, dir: path.parent().map(Path::to_path_buf).unwrap_or_default(), errors: Vec::new(), hasher: blake3::Hasher::new(), files, read: BTreeMap::new() };
     ctx.hasher.update(text.as_bytes());
 
     // [planet]
@@ -553,8 +545,8 @@ pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec
             }
             (None, None) => Some(Amount::Profile),
         };
-        if a.reference_wavelength_nm.is_some() && a.optical_depth.is_none() {
-            ctx.err(a.reference_wavelength_nm.as_ref().unwrap(), format!("{label}: reference_wavelength_nm only goes with optical_depth"));
+        if let (Some(r), None) = (&a.reference_wavelength_nm, &a.optical_depth) {
+            ctx.err(r, format!("{label}: reference_wavelength_nm only goes with optical_depth"));
         }
         let (Some(prof), Some(optics), Some(amount)) = (prof, optics, amount) else { continue };
         let p = &profiles[prof];
@@ -624,18 +616,14 @@ pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec
             if d >= 30.0 {
                 ctx.err(s.angular_diameter_deg.as_ref().unwrap(), format!("sun.angular_diameter_deg must be below 30, found {d}"));
             }
-            ctx.spectral(&s.spectrum, s.spectrum.get_ref(), "sun.spectrum", "irradiance_w_m2_nm")
-                .map(|t| Sun { irradiance_w_m2_nm: t, angular_diameter_deg: d })
+            ctx.spectral(&s.spectrum, s.spectrum.get_ref(), "sun.spectrum", "irradiance_w_m2_nm").map(|t| Sun { irradiance_w_m2_nm: t, angular_diameter_deg: d })
         }
     };
 
     if !ctx.errors.is_empty() {
         return Err(LoadError { errors: ctx.errors });
     }
-    let name = raw
-        .name
-        .map(|n| n.into_inner())
-        .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
+    let name = raw.name.map(|n| n.into_inner()).unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default());
     let atm = Atmosphere {
         name,
         description: raw.description.map(|d| d.into_inner()).unwrap_or_default(),

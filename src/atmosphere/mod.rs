@@ -174,9 +174,7 @@ pub struct Bundle {
 impl Atmosphere {
     /// Loads and validates an atmosphere file.
     pub fn load(path: &Path) -> Result<Atmosphere, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError {
-            errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }],
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }] })?;
         Atmosphere::from_str(path, &text)
     }
 
@@ -189,9 +187,7 @@ impl Atmosphere {
     /// Loads an atmosphere file with every data file it reads, so that it
     /// can travel in a farm job (see [`Atmosphere::from_bundle`]).
     pub fn load_bundle(path: &Path) -> Result<(Atmosphere, Bundle), LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError {
-            errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }],
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| LoadError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }] })?;
         let (atm, files) = config::parse(path, &text, None)?;
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         Ok((atm, Bundle { name, text, files }))

@@ -140,16 +140,10 @@ fn print_table(atm: &Atmosphere, spectral: &[SpectralOptics], sun_xyz: [f64; 3])
     );
     for s in spectral {
         outln!();
-        outln!(
-            "  {} nm: optical depth rayleigh {:.5}  absorbers {:.5}  aerosols {:.5}",
-            s.wavelength_nm, s.rayleigh_optical_depth, s.absorber_optical_depth, s.aerosol_optical_depth
-        );
+        outln!("  {} nm: optical depth rayleigh {:.5}  absorbers {:.5}  aerosols {:.5}", s.wavelength_nm, s.rayleigh_optical_depth, s.absorber_optical_depth, s.aerosol_optical_depth);
         outln!("    {:<24} {:>10} {:>10} {:>10} {:>10} {:>14}", "component", "kind", "tau", "ssa", "g", "ext0_per_km");
         for c in s.components.iter().chain(std::iter::once(&s.total)) {
-            outln!(
-                "    {:<24} {:>10} {:>10.5} {:>10.5} {:>10.5} {:>14.5e}",
-                c.name, c.kind, c.optical_depth, c.single_scattering_albedo, c.asymmetry, c.extinction_ground_per_km
-            );
+            outln!("    {:<24} {:>10} {:>10.5} {:>10.5} {:>10.5} {:>14.5e}", c.name, c.kind, c.optical_depth, c.single_scattering_albedo, c.asymmetry, c.extinction_ground_per_km);
         }
     }
 }
@@ -212,8 +206,12 @@ fn write_plots(atm: &Atmosphere, dir: &Path, cache: &MieCache) -> Result<Vec<Pat
         series.push(Series::new(a.name.clone(), zs.iter().map(|&z| (k * p.density(z), z)).collect(), series.len()));
     }
     let path = dir.join("extinction_550nm.png");
-    plot::line_plot(&path, &Axes { title: &format!("{}: extinction at 550 nm", atm.name), x_label: "extinction coefficient (km^-1)", y_label: "altitude (km)", x_scale: Scale::Log, y_scale: Scale::Linear }, &series)
-        .map_err(anyhow::Error::msg)?;
+    plot::line_plot(
+        &path,
+        &Axes { title: &format!("{}: extinction at 550 nm", atm.name), x_label: "extinction coefficient (km^-1)", y_label: "altitude (km)", x_scale: Scale::Log, y_scale: Scale::Linear },
+        &series,
+    )
+    .map_err(anyhow::Error::msg)?;
     written.push(path);
     bar.inc(1);
 
@@ -237,18 +235,15 @@ fn write_plots(atm: &Atmosphere, dir: &Path, cache: &MieCache) -> Result<Vec<Pat
             };
             let g_fit = phase::fit_henyey_greenstein(&grid, &p);
             series.push(Series::new(format!("{w} nm"), grid.iter().copied().zip(p.iter().copied()).collect(), ci));
-            series.push(
-                Series::new(
-                    format!("best Henyey-Greenstein {w} nm, g = {g_fit:.3}"),
-                    grid.iter().map(|t| (*t, phase::henyey_greenstein(t.to_radians().cos(), g_fit))).collect(),
-                    ci,
-                )
-                .dashed(),
-            );
+            series.push(Series::new(format!("best Henyey-Greenstein {w} nm, g = {g_fit:.3}"), grid.iter().map(|t| (*t, phase::henyey_greenstein(t.to_radians().cos(), g_fit))).collect(), ci).dashed());
         }
         let path = dir.join(format!("phase_{}.png", safe_name(&a.name)));
-        plot::line_plot(&path, &Axes { title: &format!("{}: {} phase function", atm.name, a.name), x_label: "scattering angle (deg)", y_label: "phase function (sr^-1)", x_scale: Scale::Linear, y_scale: Scale::Log }, &series)
-            .map_err(anyhow::Error::msg)?;
+        plot::line_plot(
+            &path,
+            &Axes { title: &format!("{}: {} phase function", atm.name, a.name), x_label: "scattering angle (deg)", y_label: "phase function (sr^-1)", x_scale: Scale::Linear, y_scale: Scale::Log },
+            &series,
+        )
+        .map_err(anyhow::Error::msg)?;
         written.push(path);
         bar.inc(1);
     }

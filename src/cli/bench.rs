@@ -1,17 +1,17 @@
 //! `sky bench`: timings reported in the README.
 
 use anyhow::{Context, Result};
+use serde_json::json;
 use sky::atmosphere::Atmosphere;
+use sky::atmosphere::RefractiveIndex;
+use sky::mie::{self, phase, LogNormal};
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
 use sky::render::{self as rend, Scene, Settings, WavelengthSampling};
-use std::sync::atomic::AtomicBool;
-use serde_json::json;
-use sky::atmosphere::RefractiveIndex;
-use sky::mie::{self, phase, LogNormal};
 use sky::table::Table;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 #[derive(clap::Subcommand)]
@@ -124,7 +124,13 @@ fn spawn_worker(threads: usize, token: &str, name: &str) -> Result<BenchWorker> 
 }
 
 /// Times one farm render of `job` on `workers` (seconds).
-fn farm_seconds(rt: &tokio::runtime::Runtime, job: &std::sync::Arc<sky::farm::coordinator::FarmJob>, workers: Vec<sky::farm::coordinator::WorkerSpec>, scene: Option<std::sync::Arc<Scene>>, token: &str) -> Result<f64> {
+fn farm_seconds(
+    rt: &tokio::runtime::Runtime,
+    job: &std::sync::Arc<sky::farm::coordinator::FarmJob>,
+    workers: Vec<sky::farm::coordinator::WorkerSpec>,
+    scene: Option<std::sync::Arc<Scene>>,
+    token: &str,
+) -> Result<f64> {
     use sky::farm::coordinator::{run, Options};
     let opts = Options { token: Some(token.to_string()), ..Options::default() };
     let t = Instant::now();
@@ -260,22 +266,12 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             outln!("colour noise per second, {} ({} directions, sun at 60 deg, {spp} spp, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
             let mut results = Vec::new();
             for (name, ws) in [("luminance", WavelengthSampling::Luminance), ("tristimulus", WavelengthSampling::Tristimulus), ("hero", WavelengthSampling::Hero)] {
-                let settings = Settings {
-                    xyz: true,
-                    spectral_nm: vec![],
-                    wavelength_sampling: ws,
-                    ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![], spp, 7, false)
-                };
+                let settings = Settings { xyz: true, spectral_nm: vec![], wavelength_sampling: ws, ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![], spp, 7, false) };
                 let scene = Scene::new(&atm, &settings, &cache, &|| {});
                 let t = Instant::now();
                 let img = rend::render(&scene, &settings, &AtomicBool::new(false), &|| {}).expect("not cancelled");
                 let secs = t.elapsed().as_secs_f64();
-                let noise: f64 = img
-                    .pixels
-                    .iter()
-                    .map(|p| (0..3).map(|c| (p.xyz_stderr[c] / p.xyz[c]).powi(2)).sum::<f64>())
-                    .sum::<f64>()
-                    / img.pixels.len() as f64;
+                let noise: f64 = img.pixels.iter().map(|p| (0..3).map(|c| (p.xyz_stderr[c] / p.xyz[c]).powi(2)).sum::<f64>()).sum::<f64>() / img.pixels.len() as f64;
                 outln!("  {name:<12} {secs:>7.2} s   mean Σ(rel. se)² {noise:.3e}   noise x time {:.3e}", noise * secs);
                 results.push((name, noise * secs));
             }
@@ -334,7 +330,12 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                 outln!("render efficiency, {} ({} directions at 550 nm, sun at 60 deg, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
                 outln!("  shipped: {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", full.paths / full.seconds, t_full);
                 outln!("  naive:   {:>9.0} paths/s, time to 1% RMSE {:>10.3} s", naive.paths / naive.seconds, t_naive);
-                outln!("  speed-up of the shipped estimator: {:.0}x (a lower bound: the naive estimator lit {} of {} directions, through the sun's disk only)", t_naive / t_full, naive.mean.iter().filter(|m| **m > 0.0).count(), BENCH_DIRECTIONS.len());
+                outln!(
+                    "  speed-up of the shipped estimator: {:.0}x (a lower bound: the naive estimator lit {} of {} directions, through the sun's disk only)",
+                    t_naive / t_full,
+                    naive.mean.iter().filter(|m| **m > 0.0).count(),
+                    BENCH_DIRECTIONS.len()
+                );
                 outln!("  {:>10} {:>10} {:>14} {:>10} {:>14} {:>10} {:>8}", "zenith", "azimuth", "shipped", "rel.se", "naive", "rel.se", "z");
                 for (i, (zen, az)) in BENCH_DIRECTIONS.iter().enumerate() {
                     outln!(

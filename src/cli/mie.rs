@@ -104,8 +104,7 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
         return usage(format!("--x {x} is beyond the supported range (up to 1e5)"));
     }
     let r = mie::bhmie(a.m, x, &mus);
-    let phase: Vec<f64> =
-        r.s1.iter().zip(&r.s2).map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca)).collect();
+    let phase: Vec<f64> = r.s1.iter().zip(&r.s2).map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca)).collect();
     if a.json {
         let mut v = json!({
             "m_re": a.m.re, "m_im": a.m.im, "x": x,
@@ -135,10 +134,7 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
         }
         outln!("  {:>9}  {:>26}  {:>26}  {:>14}", "angle_deg", "S1", "S2", "phase_sr_inv");
         for i in 0..mus.len() {
-            outln!(
-                "  {:>9}  {:>12.5e}{:+12.5e}i  {:>12.5e}{:+12.5e}i  {:>14.6e}",
-                a.angles_deg[i], r.s1[i].re, r.s1[i].im, r.s2[i].re, r.s2[i].im, phase[i]
-            );
+            outln!("  {:>9}  {:>12.5e}{:+12.5e}i  {:>12.5e}{:+12.5e}i  {:>14.6e}", a.angles_deg[i], r.s1[i].re, r.s1[i].im, r.s2[i].re, r.s2[i].im, phase[i]);
         }
     }
     Ok(ExitCode::SUCCESS)

@@ -216,7 +216,7 @@ fn parse_size(s: &str) -> Result<(usize, usize), String> {
     Ok((w, h))
 }
 
-fn read_directions(path: &PathBuf) -> Result<Vec<(f64, f64)>> {
+fn read_directions(path: &std::path::Path) -> Result<Vec<(f64, f64)>> {
     let t = Table::read(path).map_err(anyhow::Error::new)?;
     let z = t.column("zenith_deg").map_err(anyhow::Error::new)?;
     let a = t.column("azimuth_deg").map_err(anyhow::Error::new)?;
@@ -477,15 +477,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     } else if a.json_progress {
         outln!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
     } else {
-        eprintln!(
-            "rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
-            width,
-            height,
-            taken / n as f64,
-            render_s,
-            samples / render_s.max(1e-9),
-            prep_s
-        );
+        eprintln!("rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)", width, height, taken / n as f64, render_s, samples / render_s.max(1e-9), prep_s);
     }
     if paths_cut > 0 && !a.json {
         eprintln!("sky render: warning: {paths_cut} paths were cut at the limit of {} vertices (the image is biased low where they were)", render::tracer::MAX_VERTICES);

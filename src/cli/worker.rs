@@ -152,9 +152,7 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
     };
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let threads = a.threads.filter(|&t| t > 0).unwrap_or((cores - 1).max(1));
-    let name = a.name.clone().unwrap_or_else(|| {
-        std::fs::read_to_string("/etc/hostname").ok().map(|h| h.trim().to_string()).filter(|h| !h.is_empty()).unwrap_or_else(|| "worker".into())
-    });
+    let name = a.name.clone().unwrap_or_else(|| std::fs::read_to_string("/etc/hostname").ok().map(|h| h.trim().to_string()).filter(|h| !h.is_empty()).unwrap_or_else(|| "worker".into()));
     // Lower our priority before any thread starts: threads inherit it.
     // SAFETY: setpriority on our own process.
     #[cfg(unix)]
@@ -173,7 +171,8 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
         Some(d) => MieCache::new(Some(d.clone())),
         None => MieCache::from_env(),
     };
-    let faults = Faults { stall_after_tasks: a.fault_stall_after, corrupt_tiles: a.fault_corrupt, perturb_tiles: a.fault_perturb, protocol_version: a.fault_protocol, sigkill_on_task: a.fault_sigkill_on_task };
+    let faults =
+        Faults { stall_after_tasks: a.fault_stall_after, corrupt_tiles: a.fault_corrupt, perturb_tiles: a.fault_perturb, protocol_version: a.fault_protocol, sigkill_on_task: a.fault_sigkill_on_task };
     let shared = Shared::new(Config { name: name.clone(), threads, token, faults, cache })?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     rt.block_on(serve(shared, addr, tls, a.schedule.clone(), a.owner_load_limit))

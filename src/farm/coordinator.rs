@@ -179,7 +179,9 @@ pub struct Outcome {
 enum Kind {
     Render,
     /// A second (or third) rendering of a column: an entry of `checks`.
-    Verify { check: u64 },
+    Verify {
+        check: u64,
+    },
 }
 
 /// A column to render again on another worker and compare bit for bit.
@@ -349,12 +351,7 @@ impl Sched {
             return self.new_task(w, start, count, Kind::Render);
         }
         // Nothing new: duplicate the oldest task running on someone else.
-        let oldest = self
-            .tasks
-            .iter()
-            .filter(|(_, t)| t.kind == Kind::Render && t.runners.len() == 1 && t.runners[0].0 != w)
-            .min_by_key(|(_, t)| t.runners[0].1)
-            .map(|(&id, _)| id);
+        let oldest = self.tasks.iter().filter(|(_, t)| t.kind == Kind::Render && t.runners.len() == 1 && t.runners[0].0 != w).min_by_key(|(_, t)| t.runners[0].1).map(|(&id, _)| id);
         if let Some(id) = oldest {
             let t = self.tasks.get_mut(&id).unwrap();
             t.runners.push((w, Instant::now()));
@@ -819,6 +816,9 @@ async fn wait_or_done(shared: &Shared, w: usize, d: Duration) -> bool {
     false
 }
 
+// One backend per worker, a handful per render: the size difference of the
+// variants does not matter.
+#[allow(clippy::large_enum_variant)]
 enum Backend {
     Local { pool: Arc<rayon::ThreadPool>, scene: Arc<Scene> },
     Remote { uri: String, client: Option<Client>, has_job: bool, hello_name: Option<String> },

@@ -60,11 +60,7 @@ pub fn open(job: &proto::Job) -> Result<(Atmosphere, Settings), JobError> {
     if settings.width == 0 || settings.height == 0 || settings.spp == 0 {
         return Err(JobError::Settings(format!("empty image {}x{} at {} spp", settings.width, settings.height, settings.spp)));
     }
-    let bundle = Bundle {
-        name: job.atmosphere_name.clone(),
-        text: job.atmosphere_toml.clone(),
-        files: job.files.iter().map(|f| (f.name.clone(), f.content.clone())).collect(),
-    };
+    let bundle = Bundle { name: job.atmosphere_name.clone(), text: job.atmosphere_toml.clone(), files: job.files.iter().map(|f| (f.name.clone(), f.content.clone())).collect() };
     let atm = Atmosphere::from_bundle(&bundle).map_err(|e| JobError::Atmosphere(e.to_string()))?;
     Ok((atm, settings))
 }

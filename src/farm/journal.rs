@@ -80,8 +80,7 @@ impl Journal {
         }
         let mut at = MAGIC.len() + nl + 1;
         let mut columns = BTreeMap::new();
-        loop {
-            let Some((kind, column, payload, next)) = record(&bytes, at) else { break };
+        while let Some((kind, column, payload, next)) = record(&bytes, at) {
             match kind {
                 KIND_COLUMN => match proto::Tile::decode(payload) {
                     Ok(t) if t.first_column == column && t.columns == 1 => {

@@ -62,14 +62,7 @@ pub fn decode(tile: &proto::Tile, want: &Expect) -> Result<Vec<Vec<PixelResult>>
         return Err(TileError::Job { theirs: tile.job_hash.clone(), ours: want.job_hash.to_string() });
     }
     if tile.first_column != want.first_column || tile.columns != want.columns || tile.task_id != want.task_id {
-        return Err(TileError::Columns {
-            first: tile.first_column,
-            columns: tile.columns,
-            task: tile.task_id,
-            want_first: want.first_column,
-            want_columns: want.columns,
-            want_task: want.task_id,
-        });
+        return Err(TileError::Columns { first: tile.first_column, columns: tile.columns, task: tile.task_id, want_first: want.first_column, want_columns: want.columns, want_task: want.task_id });
     }
     let lines = want.lines as usize;
     let per = values_per_pixel(lines);

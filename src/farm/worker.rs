@@ -212,11 +212,7 @@ impl Worker for Service {
         let task = request.into_inner();
         let s = self.shared.clone();
         if task.protocol_version != s.protocol_version() {
-            return Err(Status::failed_precondition(format!(
-                "this worker speaks farm protocol {}, the task protocol {}",
-                s.protocol_version(),
-                task.protocol_version
-            )));
+            return Err(Status::failed_precondition(format!("this worker speaks farm protocol {}, the task protocol {}", s.protocol_version(), task.protocol_version)));
         }
         if task.build_version != super::build_version() {
             return Err(Status::failed_precondition(format!(
@@ -275,12 +271,7 @@ impl Worker for Service {
 }
 
 /// Runs one task to its tile, heartbeating through `tx`.
-async fn run_task(
-    s: &Arc<Shared>,
-    task: proto::RenderTask,
-    prepared: Option<Arc<(Scene, Settings)>>,
-    tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>,
-) -> Result<proto::Tile, Status> {
+async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc<(Scene, Settings)>>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
     let mut paused = s.paused_tx.subscribe();
     let cancel = Arc::new(AtomicBool::new(false));
     let pixels = Arc::new(AtomicU64::new(0));
@@ -341,9 +332,8 @@ async fn run_task(
         })
     };
     let pixels_hb = pixels.clone();
-    let columns = watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false))
-        .await?
-        .map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
+    let columns =
+        watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false)).await?.map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };

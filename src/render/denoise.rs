@@ -91,7 +91,13 @@ fn distance2(a: &PixelResult, b: &PixelResult, k: f64) -> Option<f64> {
         // a dark precise one (the sky over the ground, a spike) is not "the same".
         let s2 = 2.0 * a.xyz_stderr[ch].min(b.xyz_stderr[ch]).powi(2);
         let diff = (a.xyz[ch] - a.xyz_direct[ch]) - (b.xyz[ch] - b.xyz_direct[ch]);
-        d += if s2 > 0.0 { diff * diff / (k * k * s2) } else if diff == 0.0 { 0.0 } else { 1e6 };
+        d += if s2 > 0.0 {
+            diff * diff / (k * k * s2)
+        } else if diff == 0.0 {
+            0.0
+        } else {
+            1e6
+        };
     }
     Some(d / 3.0)
 }

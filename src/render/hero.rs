@@ -15,11 +15,11 @@
 //! phase sampling differ between bands (the null-scattering path integral of
 //! Miller, Georgiev and Jarosz 2019 gives these densities).
 
+use super::bands::HeroSet;
+pub use super::bands::HERO_N;
 use super::guide::RayGuide;
 use super::rng::Rng;
 use super::tracer::{choose_forced, survival_probability, Forced, PathSample, Tracer, EPS_KM, MAX_VERTICES, ROULETTE_FROM_DEPTH};
-pub use super::bands::HERO_N;
-use super::bands::HeroSet;
 use glam::DVec3;
 use std::f64::consts::PI;
 

@@ -17,7 +17,13 @@ fn shell_edges(top_km: f64) -> Vec<f64> {
     let mut e = vec![0.0];
     let mut z = 0.0f64;
     while z < top_km - 1e-9 {
-        let step = if z < 20.0 - 1e-9 { 0.25 } else if z < 40.0 - 1e-9 { 1.0 } else { 5.0 };
+        let step = if z < 20.0 - 1e-9 {
+            0.25
+        } else if z < 40.0 - 1e-9 {
+            1.0
+        } else {
+            5.0
+        };
         z = (z + step).min(top_km);
         e.push(z);
     }
@@ -57,9 +63,15 @@ pub struct Medium {
 pub enum Phase {
     /// No scattering (a pure absorber).
     None,
-    Rayleigh { depolarization: f64 },
-    HenyeyGreenstein { g: f64 },
-    CornetteShanks { g: f64 },
+    Rayleigh {
+        depolarization: f64,
+    },
+    HenyeyGreenstein {
+        g: f64,
+    },
+    CornetteShanks {
+        g: f64,
+    },
     Table(Arc<PhaseTable>),
 }
 

@@ -237,16 +237,10 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     if centre.is_none() && !jitter {
         return empty;
     }
-    let tracers_band: Vec<Tracer> = scene
-        .band_optics
-        .iter()
-        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns))
-        .collect();
-    let tracers_line: Vec<Tracer> = scene
-        .line_optics
-        .iter()
-        .map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns))
-        .collect();
+    let tracers_band: Vec<Tracer> =
+        scene.band_optics.iter().map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns)).collect();
+    let tracers_line: Vec<Tracer> =
+        scene.line_optics.iter().map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns)).collect();
     let origin = match tracers_band.first().or(tracers_line.first()) {
         Some(t) => t.observer(s.altitude_m / 1000.0),
         None => return empty,
@@ -280,7 +274,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
         // stopping point is as deterministic as the samples themselves.
         if let Some(target) = s.max_rel_error {
             let kk = k as u32;
-            if kk >= ADAPTIVE_MIN_SPP && kk % ADAPTIVE_CHECK_SPP == 0 {
+            if kk >= ADAPTIVE_MIN_SPP && kk.is_multiple_of(ADAPTIVE_CHECK_SPP) {
                 let m = if s.xyz { &xyz[1] } else { &lines[0] };
                 let mean = m.mean();
                 if mean <= 0.0 || m.stderr() <= target * mean {

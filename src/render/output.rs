@@ -50,11 +50,7 @@ pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, spectral_nm: &
 /// XYZ → linear sRGB (IEC 61966-2-1, D65; the matrix colour-science uses).
 pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
     let [x, y, z] = xyz;
-    [
-        3.2404542 * x - 1.5371385 * y - 0.4985314 * z,
-        -0.9692660 * x + 1.8760108 * y + 0.0415560 * z,
-        0.0556434 * x - 0.2040259 * y + 1.0572252 * z,
-    ]
+    [3.2404542 * x - 1.5371385 * y - 0.4985314 * z, -0.9692660 * x + 1.8760108 * y + 0.0415560 * z, 0.0556434 * x - 0.2040259 * y + 1.0572252 * z]
 }
 
 fn srgb_oetf(v: f64) -> f64 {

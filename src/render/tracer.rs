@@ -124,7 +124,18 @@ impl<'a> Tracer<'a> {
             Estimator::Naive => None,
             Estimator::Full => Tracer::sun_lobe(spectral).map(|i| (i, LOBE_PROBABILITY)),
         };
-        Tracer { medium, spectral, sun_dir: sun_dir.normalize(), sun_cos_half: cos_half, sun_disk_radiance: 1.0 / omega, estimator, sun_disk: true, columns: None, lobe, skylight: estimator == Estimator::Full }
+        Tracer {
+            medium,
+            spectral,
+            sun_dir: sun_dir.normalize(),
+            sun_cos_half: cos_half,
+            sun_disk_radiance: 1.0 / omega,
+            estimator,
+            sun_disk: true,
+            columns: None,
+            lobe,
+            skylight: estimator == Estimator::Full,
+        }
     }
 
     /// The component whose phase function has the highest forward peak, if
@@ -533,15 +544,7 @@ impl<'a> Tracer<'a> {
     /// Ratio tracking of N extinction coefficients at once against one
     /// majorant per shell (the hero tracer's four bands share one); Russian
     /// roulette once the largest transmittance is below 0.1.
-    pub(crate) fn ratio_track_n<const N: usize>(
-        &self,
-        mut p: DVec3,
-        d: DVec3,
-        t_max: f64,
-        majorant: &[f64],
-        sigma_t: impl Fn(f64) -> [f64; N],
-        rng: &mut Rng,
-    ) -> [f64; N] {
+    pub(crate) fn ratio_track_n<const N: usize>(&self, mut p: DVec3, d: DVec3, t_max: f64, majorant: &[f64], sigma_t: impl Fn(f64) -> [f64; N], rng: &mut Rng) -> [f64; N] {
         let mut tr = [1.0; N];
         let mut remaining = t_max;
         for _ in 0..1_000_000 {
