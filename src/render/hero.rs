@@ -123,13 +123,7 @@ impl<'a> HeroTracer<'a> {
             if f[j] == 0.0 || t_sun[j] <= 0.0 {
                 continue;
             }
-            let mut c_j = 0.0;
-            for i in 0..h.spectral.extinction.len() {
-                let s = self.sigma_s_i(j, i, z);
-                if s > 0.0 {
-                    c_j += s * self.t[j].spectral.phase[i].eval(mu_s);
-                }
-            }
+            let (c_j, _) = self.t[j].scattering_at(z, mu_s);
             res[j] += f[j] * tr[j] * c_j * t_sun[j] / den;
         }
         true

@@ -242,12 +242,14 @@ impl<'a> Tracer<'a> {
                     return 0.0;
                 }
                 let z = self.altitude(y);
-                let (sp, ss) = self.scattering_at(z, w.dot(self.sun_dir));
+                // Delta tracking reached y with density σ_t T: the estimate
+                // is Σ_i σ_s,i p_i(μ_sun) / σ_t times the sun's transmittance.
+                let (sp, _) = self.scattering_at(z, w.dot(self.sun_dir));
                 let st = self.spectral.sigma_t(self.medium, z);
-                if !(st > 0.0) || !(ss > 0.0) {
+                if !(st > 0.0) {
                     return 0.0;
                 }
-                beta * weight * (ss / st) * (sp / ss) * t_sun
+                beta * weight * sp / st * t_sun
             }
             Flight::Ground(g) => {
                 let n = self.up(g);
@@ -645,15 +647,7 @@ impl<'a> Tracer<'a> {
         if t_sun <= 0.0 {
             return true;
         }
-        let sp = self.spectral;
-        let mu_s = d.dot(self.sun_dir);
-        let mut c = 0.0;
-        for i in 0..sp.extinction.len() {
-            let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
-            if s > 0.0 {
-                c += s * sp.phase[i].eval(mu_s);
-            }
-        }
+        let (c, _) = self.scattering_at(z, d.dot(self.sun_dir));
         *l += beta * self.transmittance_to(p, d, t, rng) * c * t_sun / pdf;
         true
     }
@@ -786,14 +780,7 @@ impl<'a> Tracer<'a> {
                         t_sun = t;
                         shadowed = t == 0.0;
                         if t > 0.0 && !sun_done {
-                            let mu_s = d.dot(self.sun_dir);
-                            let mut p_mix = 0.0;
-                            for i in 0..k {
-                                let s = sp.extinction[i] * self.medium.density(i, z) * sp.albedo[i];
-                                if s > 0.0 {
-                                    p_mix += s * sp.phase[i].eval(mu_s);
-                                }
-                            }
+                            let (p_mix, _) = self.scattering_at(z, d.dot(self.sun_dir));
                             l += beta * nee_weight * p_mix / sigma_s * t;
                         }
                     }
