@@ -21,6 +21,7 @@ pub mod hero;
 pub mod medium;
 pub mod output;
 pub mod rng;
+pub mod sampling;
 pub mod tracer;
 
 use crate::atmosphere::Atmosphere;

@@ -13,6 +13,8 @@
 use super::guide::RayGuide;
 use super::medium::{ColumnPath, ColumnTable, Medium, Phase, Spectral};
 use super::rng::Rng;
+use super::sampling::{self, cosine_hemisphere};
+pub use super::sampling::{around, sample_hg};
 use crate::atmosphere::Geometry;
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -597,30 +599,7 @@ impl<'a> Tracer<'a> {
 
     /// Samples a direction from `phase` around `d`.
     pub(crate) fn sample_phase(&self, phase: &Phase, d: DVec3, rng: &mut Rng) -> DVec3 {
-        let mu = match phase {
-            Phase::None => 1.0,
-            Phase::Table(t) => t.sample_mu(rng.uniform()),
-            Phase::HenyeyGreenstein { g } => sample_hg(*g, rng.uniform()),
-            Phase::CornetteShanks { g } => loop {
-                // Rejection from HG: p_CS / p_HG ∝ (1 + μ²) / 2 ≤ 1.
-                let mu = sample_hg(*g, rng.uniform());
-                if rng.uniform() * 2.0 < 1.0 + mu * mu {
-                    break mu;
-                }
-            },
-            Phase::Rayleigh { depolarization } => {
-                let gamma = depolarization / (2.0 - depolarization);
-                let (a, b) = (1.0 + 3.0 * gamma, 1.0 - gamma);
-                loop {
-                    let mu = 2.0 * rng.uniform() - 1.0;
-                    if rng.uniform() * (a + b) < a + b * mu * mu {
-                        break mu;
-                    }
-                }
-            }
-        };
-        let phi = 2.0 * PI * rng.uniform();
-        around(d, mu, phi)
+        sampling::sample_phase(phase, d, rng)
     }
 
     /// One path sample of the radiance arriving at `origin` from direction
@@ -906,46 +885,4 @@ fn sample_majorant(segs: &[(f64, f64, f64)], one_minus: f64, rng: &mut Rng) -> O
         acc += dt;
     }
     None
-}
-
-/// Henyey–Greenstein sampling of μ (Henyey and Greenstein 1941; pbrt-v4's
-/// SampleHenyeyGreenstein, written for μ = cos θ between the directions of
-/// travel).
-#[inline]
-pub fn sample_hg(g: f64, u: f64) -> f64 {
-    if g.abs() < 1e-3 {
-        return 1.0 - 2.0 * u;
-    }
-    let s = (1.0 - g * g) / (1.0 - g + 2.0 * g * u);
-    ((1.0 + g * g - s * s) / (2.0 * g)).clamp(-1.0, 1.0)
-}
-
-/// The direction at angle acos(μ) from `d`, rotated by φ about it.
-#[inline]
-pub fn around(d: DVec3, mu: f64, phi: f64) -> DVec3 {
-    let (t, b) = d.any_orthonormal_pair();
-    let s = (1.0 - mu * mu).max(0.0).sqrt();
-    (t * (s * libm::cos(phi)) + b * (s * libm::sin(phi)) + d * mu).normalize()
-}
-
-/// Cosine-weighted direction about the normal `n`.
-#[inline]
-fn cosine_hemisphere(n: DVec3, rng: &mut Rng) -> DVec3 {
-    let u1 = rng.uniform();
-    let phi = 2.0 * PI * rng.uniform();
-    let mu = u1.sqrt();
-    around(n, mu, phi)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hg_sampling_mean_is_g() {
-        let n = 200_000;
-        let g = 0.7;
-        let m: f64 = (0..n).map(|i| sample_hg(g, (i as f64 + 0.5) / n as f64)).sum::<f64>() / n as f64;
-        assert!((m - g).abs() < 1e-3, "{m}");
-    }
 }
