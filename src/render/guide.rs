@@ -30,7 +30,7 @@ const MAX_BINS: usize = 4096;
 /// A vertex counts as in the Earth's shadow when the ray toward the sun
 /// meets the ground (its sun transmittance is exactly 0 in every band):
 /// the sunlight scattered toward it along the direction it sends the path
-/// on is then estimated with a coarse guide (`build_secondary`). Measured
+/// on is then estimated with a coarse guide (`sample_secondary`). Measured
 /// on the hazed sky over 24 directions, 3000 samples each (variance × time
 /// against the tracer without the estimate, median over the directions),
 /// with a threshold on the transmittance instead: with the sun 4° below
@@ -59,15 +59,16 @@ impl RayGuide {
     /// 0.05 of majorant optical depth and 1/256 of the ray each.
     pub fn build(tracer: &Tracer, origin: DVec3, dir: DVec3) -> Option<RayGuide> {
         let mut segs = Vec::new();
-        let ground = tracer.segments(origin, dir, &tracer.spectral.majorant, &mut segs);
-        let end = ground.or(segs.last().map(|s| s.1))?;
+        let ground = tracer.medium.majorant_segments(origin, dir, &tracer.spectral.majorant, &mut segs);
+        let end = ground.or(segs.last().map(|s| s.end_km))?;
         if !(end > 0.0) {
             return None;
         }
         let max_dt = end * MAX_BIN_FRACTION;
         let mut edges = vec![0.0];
-        for &(a, b, m) in &segs {
-            let b = b.min(end);
+        for s in &segs {
+            let (a, m) = (s.start_km, s.majorant_per_km);
+            let b = s.end_km.min(end);
             if b <= a {
                 continue;
             }
@@ -82,34 +83,45 @@ impl RayGuide {
         Self::from_edges(&[tracer], origin, dir, edges)
     }
 
-    /// A coarse guide for a scattered ray leaving a point the sun does not
-    /// reach (see `Tracer::skylight_along`): `SECONDARY_BINS` equal bins
-    /// from `origin` to the end of the ray (`end_km`: the ground or the top
-    /// of the atmosphere), the integrand summed over `tracers` (the bands
-    /// of a hero set, so the density is the same whichever of them is the
-    /// hero) and taken in each bin as the larger of its two edge values.
-    /// Coarse is enough: the guide only has to find where the sun shines.
-    /// It covers every lit point: the Earth's shadow is convex, so a bin
-    /// whose two edges are in shadow is in shadow all along.
-    pub fn build_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, end_km: f64) -> Option<RayGuide> {
+    /// A distance along a scattered ray leaving a point the sun does not
+    /// reach (see `Kernel::skylight_along`), from `origin` to the end of
+    /// the ray (the ground or the top of the atmosphere), and its density,
+    /// drawn from a coarse guide: `SECONDARY_BINS` equal bins, the
+    /// single-scattering integrand summed over `tracers` (the bands of a
+    /// hero set, so the density is the same whichever of them decides) and
+    /// taken in each bin as the larger of its two edge values. Coarse is
+    /// enough: the guide only has to find where the sun shines. It covers
+    /// every lit point: the Earth's shadow is convex, so a bin whose two
+    /// edges are in shadow is in shadow all along. None when nothing on the
+    /// ray is lit. Allocation-free: `scratch` keeps the phase values.
+    pub(crate) fn sample_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, scratch: &mut SecondaryScratch, rng: &mut Rng) -> Option<(f64, f64)> {
+        let first = tracers.first()?;
+        let end_km = first.ray_end(origin, dir)?;
         if !(end_km > 0.0) {
             return None;
         }
-        let edges: Vec<f64> = (0..=SECONDARY_BINS).map(|j| end_km * j as f64 / SECONDARY_BINS as f64).collect();
-        let phases = phases_to_sun(tracers, dir);
-        let values: Vec<f64> = edges.iter().map(|&t| single_scattering(tracers, &phases, origin, dir, t)).collect();
-        let bins: Vec<f64> = values.windows(2).map(|v| v[0].max(v[1])).collect();
-        Self::from_bins(edges, &bins)
-    }
-
-    /// A distance along the ray from `origin` (to the ground or the top of
-    /// the atmosphere) drawn from [`build_secondary`](Self::build_secondary)'s
-    /// guide, with its density; None when nothing on the ray is lit.
-    pub(crate) fn sample_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, rng: &mut Rng) -> Option<(f64, f64)> {
-        let first = tracers.first()?;
-        let guide = Self::build_secondary(tracers, origin, dir, first.ray_end(origin, dir)?)?;
-        let t = guide.sample(rng.uniform());
-        Some((t, guide.pdf(t)))
+        let width_km = end_km / SECONDARY_BINS as f64;
+        let components = first.spectral.extinction.len();
+        phases_to_sun_into(tracers, dir, &mut scratch.phases);
+        let mut edge_value = [0.0; SECONDARY_BINS + 1];
+        for (j, v) in edge_value.iter_mut().enumerate() {
+            *v = single_scattering(tracers, &scratch.phases, components, origin, dir, width_km * j as f64);
+        }
+        let mut cdf = [0.0; SECONDARY_BINS + 1];
+        for j in 0..SECONDARY_BINS {
+            cdf[j + 1] = cdf[j] + edge_value[j].max(edge_value[j + 1]) * width_km;
+        }
+        let total = cdf[SECONDARY_BINS];
+        if !(total > 0.0) || !total.is_finite() {
+            return None;
+        }
+        // The bin whose cumulative mass first exceeds u, then uniformly in it.
+        let u = rng.uniform() * total;
+        let j = cdf.partition_point(|&c| c <= u).clamp(1, SECONDARY_BINS);
+        let mass = cdf[j] - cdf[j - 1];
+        let f = if mass > 0.0 { ((u - cdf[j - 1]) / mass).clamp(0.0, 1.0) } else { 0.5 };
+        let t_km = width_km * ((j - 1) as f64 + f);
+        Some((t_km, mass / total / width_km))
     }
 
     /// The guide from bin edges and a value per bin.
@@ -136,8 +148,10 @@ impl RayGuide {
         if edges.len() < 2 || *edges.last().unwrap() <= 0.0 {
             return None;
         }
-        let phases = phases_to_sun(tracers, dir);
-        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, &phases, origin, dir, 0.5 * (w[0] + w[1]))).collect();
+        let mut phases = Vec::new();
+        phases_to_sun_into(tracers, dir, &mut phases);
+        let components = tracers.first().map_or(0, |t| t.spectral.extinction.len());
+        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, &phases, components, origin, dir, 0.5 * (w[0] + w[1]))).collect();
         Self::from_bins(edges, &values)
     }
 
@@ -166,25 +180,31 @@ impl RayGuide {
     }
 }
 
-/// Each tracer's phase functions toward the sun for a ray along `dir`:
-/// μ to the sun is the same all along the ray (parallel light), so they
-/// are constants of the ray.
-fn phases_to_sun(tracers: &[&Tracer], dir: DVec3) -> Vec<Vec<f64>> {
-    tracers
-        .iter()
-        .map(|t| {
-            let sp = t.spectral;
-            let mu_sun = dir.dot(t.sun_dir);
-            (0..sp.extinction.len()).map(|i| if sp.albedo[i] > 0.0 { sp.phase[i].eval(mu_sun) } else { 0.0 }).collect()
-        })
-        .collect()
+/// Buffers of the secondary guide, reused across samples.
+#[derive(Default)]
+pub struct SecondaryScratch {
+    phases: Vec<f64>,
+}
+
+/// Each tracer's phase functions toward the sun for a ray along `dir`,
+/// flattened (tracer-major, one value per component) into `out`: μ to the
+/// sun is the same all along the ray (parallel light), so they are
+/// constants of the ray.
+fn phases_to_sun_into(tracers: &[&Tracer], dir: DVec3, out: &mut Vec<f64>) {
+    out.clear();
+    for t in tracers {
+        let sp = t.spectral;
+        let mu_sun = dir.dot(t.sun_dir);
+        out.extend((0..sp.extinction.len()).map(|i| if sp.albedo[i] > 0.0 { sp.phase[i].eval(mu_sun) } else { 0.0 }));
+    }
 }
 
 /// The single-scattering integrand σ_s(t) p(μ_sun) T(0, t) T_sun(t) at
 /// `t_km` along the ray, summed over `tracers` (which share one medium and
 /// need a column table; 0 without one), with their `phases` toward the sun
-/// (see [`phases_to_sun`]). The column paths are shared by the bands.
-fn single_scattering(tracers: &[&Tracer], phases: &[Vec<f64>], origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
+/// (see [`phases_to_sun_into`], `components` per tracer). The column paths
+/// are shared by the bands.
+fn single_scattering(tracers: &[&Tracer], phases: &[f64], components: usize, origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
     let Some(first) = tracers.first() else { return 0.0 };
     let Some(columns) = first.columns else { return 0.0 };
     let medium = first.medium;
@@ -193,7 +213,7 @@ fn single_scattering(tracers: &[&Tracer], phases: &[Vec<f64>], origin: DVec3, di
     let Some(sun) = first.column_path(columns, q, first.sun_dir, None) else { return 0.0 };
     let cam = first.column_path(columns, origin, dir, Some(t_km));
     let mut value = 0.0;
-    for (tr, phase) in tracers.iter().zip(phases) {
+    for (tr, phase) in tracers.iter().zip(phases.chunks(components.max(1))) {
         let sp = tr.spectral;
         let mut scatter = 0.0;
         for i in 0..sp.extinction.len() {

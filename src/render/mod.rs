@@ -18,10 +18,12 @@ pub mod camera;
 pub mod denoise;
 pub mod guide;
 pub mod hero;
+pub mod kernel;
 pub mod medium;
 pub mod output;
 pub mod rng;
 pub mod sampling;
+pub mod segments;
 pub mod tracer;
 
 use crate::atmosphere::Atmosphere;
@@ -29,6 +31,7 @@ use crate::mie::MieCache;
 pub use bands::{Bands, HeroSet, HERO_N};
 use camera::Camera;
 use glam::DVec3;
+use kernel::{Kernel, Scratch};
 use medium::{ColumnTable, Medium, Spectral};
 use rng::Rng;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -217,17 +220,40 @@ impl Moments {
     }
 }
 
+/// What every pixel of a render shares, built once per render: one tracer
+/// per band and per spectral line, and the observer.
+pub struct PixelTracers<'a> {
+    band: Vec<Tracer<'a>>,
+    line: Vec<Tracer<'a>>,
+    origin: Option<DVec3>,
+}
+
+impl<'a> PixelTracers<'a> {
+    pub fn new(scene: &'a Scene, s: &Settings) -> PixelTracers<'a> {
+        let sun = s.sun_direction();
+        let make = |o: &'a Spectral| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns);
+        let band: Vec<Tracer> = scene.band_optics.iter().map(make).collect();
+        let line: Vec<Tracer> = scene.line_optics.iter().map(make).collect();
+        let origin = band.first().or(line.first()).map(|t| t.observer(s.altitude_m / 1000.0));
+        PixelTracers { band, line, origin }
+    }
+}
+
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
 pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
-    render_pixel_cancellable(scene, s, pixel, &AtomicBool::new(false))
+    render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, &AtomicBool::new(false))
 }
 
 /// [`render_pixel`] that stops early (with a partial, discarded result)
 /// when `cancel` is set, so Ctrl-C does not wait for long pixels.
 pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
+    render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, cancel)
+}
+
+/// [`render_pixel_cancellable`] with the render's shared tracers.
+pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
     let (x, y) = (pixel % s.width, pixel / s.width);
-    let sun = s.sun_direction();
     let nl = scene.line_optics.len();
     let mut xyz = [Moments::default(); 3];
     let mut direct = [0.0f64; 3];
@@ -238,14 +264,8 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     if centre.is_none() && !jitter {
         return empty;
     }
-    let tracers_band: Vec<Tracer> =
-        scene.band_optics.iter().map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns)).collect();
-    let tracers_line: Vec<Tracer> =
-        scene.line_optics.iter().map(|o| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns)).collect();
-    let origin = match tracers_band.first().or(tracers_line.first()) {
-        Some(t) => t.observer(s.altitude_m / 1000.0),
-        None => return empty,
-    };
+    let (tracers_band, tracers_line) = (&tracers.band, &tracers.line);
+    let Some(origin) = tracers.origin else { return empty };
     // The first-collision guide, from the pixel's central ray at the band
     // that weighs most in luminance (see guide.rs).
     let guide = match (centre, s.estimator) {
@@ -267,6 +287,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
     // The shared majorant of the current hero set (reused, not reallocated).
     let mut majorant = Vec::new();
     let mut cut = 0u32;
+    let mut scratch = Scratch::default();
     for k in 0..s.spp as u64 {
         if k % 64 == 0 && cancel.load(Ordering::Relaxed) {
             break;
@@ -296,14 +317,14 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
                     let set = scene.bands.hero_set(u_band);
                     let ts: [&Tracer; HERO_N] = std::array::from_fn(|j| &tracers_band[set.band[j]]);
                     hero::shared_majorant_into(std::array::from_fn(|j| ts[j].spectral.majorant.as_slice()), &mut majorant);
-                    let ht = hero::HeroTracer::new(ts, &majorant);
-                    let path = ht.radiance(origin, d, &set, guide, &mut rng);
+                    let path = hero::HeroTracer::new(ts, &majorant).radiance(origin, d, guide, &mut scratch, &mut rng);
                     let (ld, ls) = (path.direct, path.scattered);
                     cut += path.cut as u32;
                     for c in 0..3 {
                         let mut v = 0.0;
                         for j in 0..HERO_N {
-                            let w = scene.bands.weight[set.band[j]][c];
+                            // Each position is distributed like one band draw.
+                            let w = scene.bands.weight[set.band[j]][c] / set.pdf[j];
                             v += (ld[j] + ls[j]) * w;
                             direct[c] += ld[j] * w;
                         }
@@ -313,8 +334,8 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
                 (_, Some(d)) => {
                     any = true;
                     let b = scene.bands.sample(u_band);
-                    let path = tracers_band[b].radiance_parts(origin, d, guide, &mut rng);
-                    let (ld, ls) = (path.direct, path.scattered);
+                    let path = Kernel::single(&tracers_band[b]).radiance(origin, d, guide, &mut scratch, &mut rng);
+                    let (ld, ls) = (path.direct[0], path.scattered[0]);
                     cut += path.cut as u32;
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
@@ -336,9 +357,9 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
                     any = true;
-                    let path = t.radiance_parts(origin, d, guide, &mut rng);
+                    let path = Kernel::single(t).radiance(origin, d, guide, &mut scratch, &mut rng);
                     cut += path.cut as u32;
-                    lines[j].add(path.direct + path.scattered);
+                    lines[j].add(path.direct[0] + path.scattered[0]);
                 }
                 None => lines[j].add(0.0),
             }
@@ -369,6 +390,7 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
 pub fn render_columns(scene: &Scene, s: &Settings, first: usize, count: usize, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Option<Vec<Vec<PixelResult>>> {
     use rayon::prelude::*;
     let h = s.height;
+    let tracers = PixelTracers::new(scene, s);
     let flat: Vec<Option<PixelResult>> = (0..count * h)
         .into_par_iter()
         .map(|i| {
@@ -376,7 +398,7 @@ pub fn render_columns(scene: &Scene, s: &Settings, first: usize, count: usize, c
                 return None;
             }
             let (c, row) = (i / h, i % h);
-            let r = render_pixel_cancellable(scene, s, row * s.width + first + c, cancel);
+            let r = render_pixel_with(&tracers, scene, s, row * s.width + first + c, cancel);
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
@@ -412,13 +434,14 @@ pub enum RenderError {
 pub fn render(scene: &Scene, s: &Settings, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<Image, RenderError> {
     use rayon::prelude::*;
     let n = s.width * s.height;
+    let tracers = PixelTracers::new(scene, s);
     let pixels: Vec<Option<PixelResult>> = (0..n)
         .into_par_iter()
         .map(|i| {
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
-            let r = render_pixel_cancellable(scene, s, i, cancel);
+            let r = render_pixel_with(&tracers, scene, s, i, cancel);
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
