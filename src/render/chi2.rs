@@ -606,6 +606,18 @@ fn wrong_samplers_are_rejected() {
         let mu = 2.0 * rng.uniform() - 1.0;
         around(d, mu, 2.0 * PI * rng.uniform())
     }));
+    // A table sampler that returns the nearest table cosine above its μ
+    // instead of interpolating (a lattice of directions). A subtler error,
+    // inverting the CDF as if the density were constant within each table
+    // interval, is not seen: it moves probability only within intervals
+    // narrower than any bin (tried: p ≈ 0.95 for both tables).
+    let cloud = cloud_table();
+    let cloud_phase = Phase::Table(cloud.clone());
+    outcomes.push(run_case("WRONG: cloud table snapped to its knots", 960, d, &|mu| cloud_phase.eval(mu), &cloud.mu, &mut |rng| {
+        let mu = cloud.sample_mu(rng.uniform());
+        let i = cloud.mu.partition_point(|&m| m < mu).min(cloud.mu.len() - 1);
+        around(d, cloud.mu[i], 2.0 * PI * rng.uniform())
+    }));
     let mix_density = mix.density(d);
     let Sampler::Mixture(parts) = &mix else { unreachable!() };
     outcomes.push(run_case("WRONG: mixture picked 0.4/0.6, not 0.3/0.7", 940, d, &*mix_density, &mix.kinks(), &mut |rng| {
