@@ -15,6 +15,8 @@
 
 pub mod bands;
 pub mod camera;
+#[cfg(test)]
+mod chi2;
 pub mod denoise;
 pub mod guide;
 pub mod hero;
