@@ -190,6 +190,45 @@ fn render_writes_exr_png_and_json() {
 }
 
 #[test]
+fn spectral_lines_render_without_xyz() {
+    let c = tempfile::tempdir().unwrap();
+    let exr_path = c.path().join("lines.exr");
+    let args = [
+        "render",
+        "atmospheres/analytic-hg.toml",
+        "--camera",
+        "fisheye",
+        "--size",
+        "6x6",
+        "--sun-zenith-deg",
+        "40",
+        "--spp",
+        "4",
+        "--spectral-nm",
+        "450,650",
+        "--no-xyz",
+        "--out",
+        exr_path.to_str().unwrap(),
+        "--json",
+    ];
+    let o = sky(&args, c.path());
+    assert!(o.status.success(), "{:?}", text(&o));
+    use exr::prelude::*;
+    let img = read_all_flat_layers_from_file(&exr_path).unwrap();
+    let names: Vec<String> = img.layer_data[0].channel_data.list.iter().map(|c| c.name.to_string()).collect();
+    assert!(names.iter().any(|x| x == "spectral.450nm") && names.iter().any(|x| x == "spectral.650nm"), "{names:?}");
+    assert!(!names.iter().any(|x| x == "Y" || x == "X" || x == "Z"), "XYZ written without being estimated: {names:?}");
+    // Without lines there is nothing to render; with a PNG there is nothing to tonemap.
+    for (extra, flag) in [(vec![] as Vec<&str>, "--spectral-nm"), (vec!["--spectral-nm", "550", "--png", "x.png"], "--png")] {
+        let mut a = vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--no-xyz", "--out", "x.exr"];
+        a.extend(extra);
+        let o = sky(&a, c.path());
+        assert_eq!(o.status.code(), Some(2), "{a:?}: {:?}", text(&o));
+        assert!(text(&o).1.contains(flag), "{a:?}: {}", text(&o).1);
+    }
+}
+
+#[test]
 fn render_bad_flags_exit_2() {
     let c = tempfile::tempdir().unwrap();
     for (args, flag) in [

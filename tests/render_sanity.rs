@@ -216,12 +216,22 @@ fn adaptive_sampling_meets_its_target() {
     let a = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
     let lit: Vec<_> = a.pixels.iter().filter(|p| p.samples > 0).collect();
     assert!(lit.len() > 50);
+    // The count comes from a pilot's variance (unbiased, see
+    // render::adaptive), so each pixel meets the target only in
+    // expectation: the median relative standard error is near it, and no
+    // pixel that stopped early is far off.
+    let mut rel: Vec<f64> = Vec::new();
     for p in &lit {
-        assert!(p.samples >= render::ADAPTIVE_MIN_SPP.min(2048));
+        assert!(p.samples >= render::ADAPTIVE_PILOT_SPP + render::ADAPTIVE_MIN_SPP);
         if p.samples < 2048 {
-            assert!(p.xyz_stderr[1] <= target * p.xyz[1], "stopped early at {} samples: {} ± {}", p.samples, p.xyz[1], p.xyz_stderr[1]);
+            rel.push(p.xyz_stderr[1] / p.xyz[1]);
         }
     }
+    rel.sort_by(f64::total_cmp);
+    assert!(rel.len() > 20, "too few pixels stopped early");
+    let median = rel[rel.len() / 2];
+    assert!((0.7 * target..=1.3 * target).contains(&median), "median relative standard error {median} against the target {target}");
+    assert!(*rel.last().unwrap() < 3.0 * target, "a pixel far above the target: {}", rel.last().unwrap());
     let (lo, hi) = (lit.iter().map(|p| p.samples).min().unwrap(), lit.iter().map(|p| p.samples).max().unwrap());
     assert!(hi > 2 * lo, "samples should follow the noise: {lo}..{hi}");
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();

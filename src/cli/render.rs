@@ -69,7 +69,7 @@ pub struct RenderArgs {
     /// Samples per pixel (with --max-rel-error: the most a pixel may take)
     #[arg(long, default_value_t = 64)]
     spp: u32,
-    /// Adaptive sampling: stop each pixel once the standard error of its Y is below this fraction of Y
+    /// Adaptive sampling: each pixel takes as many samples as a 32-sample pilot says it needs for this relative standard error of Y, at most --spp (the pilot's samples are then set aside, so stopping does not bias the mean)
     #[arg(long)]
     max_rel_error: Option<f64>,
     /// Random seed; a pixel's samples depend only on (seed, pixel, sample)
@@ -81,6 +81,9 @@ pub struct RenderArgs {
     /// Also write spectral radiance channels at these wavelengths (nm)
     #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
     spectral_nm: Vec<f64>,
+    /// Only the spectral channels of --spectral-nm, without the X, Y, Z estimate (validation against spectral references need not pay for colour)
+    #[arg(long, requires = "spectral_nm")]
+    no_xyz: bool,
     /// Also write a tonemapped PNG
     #[arg(long)]
     png: Option<PathBuf>,
@@ -244,6 +247,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if let Some(l) = a.spectral_nm.iter().find(|l| !(360.0..=830.0).contains(*l)) {
         return usage(format!("--spectral-nm: {l} is outside 360 to 830 nm"));
     }
+    if a.no_xyz && (a.png.is_some() || a.denoise) {
+        return usage("--no-xyz renders spectral channels only: --png and --denoise need X, Y, Z");
+    }
     if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {
         return usage(format!("--fov-deg must be between 0 and 179, got {}", a.fov_deg));
     }
@@ -307,7 +313,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         spp: a.spp,
         seed: a.seed,
         spectral_nm: a.spectral_nm.clone(),
-        xyz: true,
+        xyz: !a.no_xyz,
         band_nm: a.band_nm,
         wavelength_sampling: match a.wavelength_sampling {
             Sampling::Luminance => WavelengthSampling::Luminance,
@@ -439,7 +445,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         (image, None)
     };
     if let Some(o) = &a.out {
-        output::write_exr(o, &image, noisy.as_ref(), &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
+        output::write_exr(o, &image, noisy.as_ref(), settings.xyz, &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
         if let Some(j) = &journal_path {
             let _ = std::fs::remove_file(j);
         }

@@ -13,6 +13,7 @@
 //! 683 lm/W, so Y is luminance in cd m⁻²; spectral channels are radiance in
 //! W m⁻² sr⁻¹ nm⁻¹.
 
+pub mod adaptive;
 pub mod bands;
 pub mod camera;
 #[cfg(test)]
@@ -30,6 +31,7 @@ pub mod tracer;
 
 use crate::atmosphere::Atmosphere;
 use crate::mie::MieCache;
+pub use adaptive::{adaptive_samples, Moments, ADAPTIVE_MIN_SPP, ADAPTIVE_PILOT_SPP};
 pub use bands::{Bands, HeroSet, HERO_N};
 use camera::Camera;
 use glam::DVec3;
@@ -77,16 +79,30 @@ pub struct Settings {
     /// Whether camera rays see the sun's disk (off for comparisons with
     /// codes that report only diffuse radiance).
     pub sun_disk: bool,
-    /// Adaptive sampling: stop a pixel once the standard error of its Y
-    /// (or of its first spectral channel when XYZ is off) is below this
-    /// fraction of its value; `spp` is then the most a pixel may take.
+    /// Adaptive sampling: each pixel takes the samples a pilot of
+    /// [`ADAPTIVE_PILOT_SPP`] says it needs for a standard error of its Y
+    /// (or of its first spectral channel when XYZ is off) of this fraction
+    /// of its value (see [`adaptive_samples`]); `spp` is then the most a
+    /// pixel may take, pilot included.
     pub max_rel_error: Option<f64>,
 }
 
-/// Samples a pixel takes before adaptive sampling may stop it, and the
-/// interval at which it checks.
-pub const ADAPTIVE_MIN_SPP: u32 = 32;
-pub const ADAPTIVE_CHECK_SPP: u32 = 16;
+/// A pixel's running sums.
+struct Accumulator {
+    xyz: [Moments; 3],
+    direct: [f64; 3],
+    lines: Vec<Moments>,
+    taken: u32,
+    pilot: u32,
+    cut: u32,
+    any: bool,
+}
+
+impl Accumulator {
+    fn new(lines: usize) -> Accumulator {
+        Accumulator { xyz: [Moments::default(); 3], direct: [0.0; 3], lines: vec![Moments::default(); lines], taken: 0, pilot: 0, cut: 0, any: false }
+    }
+}
 
 impl Settings {
     /// Spectral radiance at the ground toward a list of (zenith, azimuth)
@@ -190,38 +206,6 @@ pub struct PixelResult {
     pub paths_cut: u32,
 }
 
-/// Running sums for a mean and its standard error.
-#[derive(Default, Clone, Copy)]
-struct Moments {
-    n: f64,
-    sum: f64,
-    sum_sq: f64,
-}
-
-impl Moments {
-    fn add(&mut self, v: f64) {
-        self.n += 1.0;
-        self.sum += v;
-        self.sum_sq += v * v;
-    }
-
-    fn mean(&self) -> f64 {
-        if self.n > 0.0 {
-            self.sum / self.n
-        } else {
-            0.0
-        }
-    }
-
-    fn stderr(&self) -> f64 {
-        if self.n < 2.0 {
-            return 0.0;
-        }
-        let m = self.mean();
-        ((self.sum_sq / self.n - m * m).max(0.0) * self.n / (self.n - 1.0) / self.n).sqrt()
-    }
-}
-
 /// What every pixel of a render shares, built once per render: one tracer
 /// per band and per spectral line, and the observer.
 pub struct PixelTracers<'a> {
@@ -257,9 +241,6 @@ pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cance
 pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
     let (x, y) = (pixel % s.width, pixel / s.width);
     let nl = scene.line_optics.len();
-    let mut xyz = [Moments::default(); 3];
-    let mut direct = [0.0f64; 3];
-    let mut lines = vec![Moments::default(); nl];
     let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl], samples: 0, paths_cut: 0 };
     let jitter = s.camera.jitters();
     let centre = s.camera.direction(x as f64 + 0.5, y as f64 + 0.5, s.width, s.height);
@@ -278,35 +259,19 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
         _ => None,
     };
     let guide = guide.as_ref();
-    let mut any = false;
     // Band choice and pixel jitter follow low-discrepancy sequences over the
     // sample index (Roberts' R1 and R2 sequences), randomly shifted per pixel
     // (Cranley–Patterson rotation): still a function of (seed, pixel, sample)
     // only, with far less colour noise than independent choices.
     let mut shift = Rng::new(s.seed, pixel as u64, u64::MAX);
     let (s_band, s_x, s_y) = (shift.uniform(), shift.uniform(), shift.uniform());
-    let mut taken = 0u32;
     // The shared majorant of the current hero set (reused, not reallocated).
     let mut majorant = Vec::new();
-    let mut cut = 0u32;
     let mut scratch = Scratch::default();
-    for k in 0..s.spp as u64 {
-        if k % 64 == 0 && cancel.load(Ordering::Relaxed) {
-            break;
-        }
-        // Adaptive sampling: a pure function of the samples so far, so the
-        // stopping point is as deterministic as the samples themselves.
-        if let Some(target) = s.max_rel_error {
-            let kk = k as u32;
-            if kk >= ADAPTIVE_MIN_SPP && kk.is_multiple_of(ADAPTIVE_CHECK_SPP) {
-                let m = if s.xyz { &xyz[1] } else { &lines[0] };
-                let mean = m.mean();
-                if mean <= 0.0 || m.stderr() <= target * mean {
-                    break;
-                }
-            }
-        }
-        taken += 1;
+    // Sample k of the pixel, added to `acc`.
+    let mut sample = |k: u64, acc: &mut Accumulator| {
+        let (xyz, direct, lines) = (&mut acc.xyz, &mut acc.direct, &mut acc.lines);
+        acc.taken += 1;
         if s.xyz {
             let mut rng = Rng::new(s.seed, pixel as u64, k);
             let kf = k as f64;
@@ -315,13 +280,13 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
             let dir = s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height);
             match (s.wavelength_sampling, dir) {
                 (WavelengthSampling::Hero, Some(d)) => {
-                    any = true;
+                    acc.any = true;
                     let set = scene.bands.hero_set(u_band);
                     let ts: [&Tracer; HERO_N] = std::array::from_fn(|j| &tracers_band[set.band[j]]);
                     hero::shared_majorant_into(std::array::from_fn(|j| ts[j].spectral.majorant.as_slice()), &mut majorant);
                     let path = hero::HeroTracer::new(ts, &majorant).radiance(origin, d, guide, &mut scratch, &mut rng);
                     let (ld, ls) = (path.direct, path.scattered);
-                    cut += path.cut as u32;
+                    acc.cut += path.cut as u32;
                     for c in 0..3 {
                         let mut v = 0.0;
                         for j in 0..HERO_N {
@@ -334,11 +299,11 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
                     }
                 }
                 (_, Some(d)) => {
-                    any = true;
+                    acc.any = true;
                     let b = scene.bands.sample(u_band);
                     let path = Kernel::single(&tracers_band[b]).radiance(origin, d, guide, &mut scratch, &mut rng);
                     let (ld, ls) = (path.direct[0], path.scattered[0]);
-                    cut += path.cut as u32;
+                    acc.cut += path.cut as u32;
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
                     for c in 0..3 {
@@ -347,7 +312,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
                     }
                 }
                 (_, None) => {
-                    for m in &mut xyz {
+                    for m in xyz.iter_mut() {
                         m.add(0.0);
                     }
                 }
@@ -358,15 +323,54 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
             let (jx, jy) = if jitter { (rng.uniform(), rng.uniform()) } else { (0.5, 0.5) };
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
-                    any = true;
+                    acc.any = true;
                     let path = Kernel::single(t).radiance(origin, d, guide, &mut scratch, &mut rng);
-                    cut += path.cut as u32;
+                    acc.cut += path.cut as u32;
                     lines[j].add(path.direct[0] + path.scattered[0]);
                 }
                 None => lines[j].add(0.0),
             }
         }
+    };
+    let stop = || cancel.load(Ordering::Relaxed);
+    let mut acc = Accumulator::new(nl);
+    match s.max_rel_error {
+        Some(target) if s.spp > ADAPTIVE_PILOT_SPP => {
+            // Adaptive sampling in two stages (see `adaptive_samples`): the
+            // pilot's samples choose the count and are then set aside, so
+            // the estimate's mean does not depend on when it stopped.
+            let mut pilot = Accumulator::new(nl);
+            for k in 0..ADAPTIVE_PILOT_SPP as u64 {
+                if k % 64 == 0 && stop() {
+                    break;
+                }
+                sample(k, &mut pilot);
+            }
+            let left = s.spp - ADAPTIVE_PILOT_SPP;
+            let n = match if s.xyz { Some(&pilot.xyz[1]) } else { pilot.lines.first() } {
+                Some(m) => adaptive_samples(m, target, left),
+                None => left,
+            };
+            for k in ADAPTIVE_PILOT_SPP as u64..(ADAPTIVE_PILOT_SPP + n) as u64 {
+                if k % 64 == 0 && stop() {
+                    break;
+                }
+                sample(k, &mut acc);
+            }
+            acc.any |= pilot.any;
+            acc.cut += pilot.cut;
+            acc.pilot = pilot.taken;
+        }
+        _ => {
+            for k in 0..s.spp as u64 {
+                if k % 64 == 0 && stop() {
+                    break;
+                }
+                sample(k, &mut acc);
+            }
+        }
     }
+    let Accumulator { xyz, direct, lines, taken, pilot, cut, any } = acc;
     if !any {
         return empty;
     }
@@ -379,7 +383,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
         empty.spectral[j] = lines[j].mean();
         empty.spectral_stderr[j] = lines[j].stderr();
     }
-    empty.samples = taken;
+    empty.samples = taken + pilot;
     empty.paths_cut = cut;
     empty
 }

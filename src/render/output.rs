@@ -11,12 +11,13 @@ pub type Metadata = Vec<(String, String)>;
 
 /// Writes the image as a single-layer OpenEXR with f32 channels.
 /// With `noisy`, X, Y, Z are the denoised values and the image before
-/// denoising is kept in `noisy.X`, `noisy.Y`, `noisy.Z`.
-pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
+/// denoising is kept in `noisy.X`, `noisy.Y`, `noisy.Z`. Without `xyz`
+/// (a render of spectral lines only) there are no X, Y, Z channels.
+pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, xyz: bool, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
     let (w, h) = (img.width, img.height);
     let chan = |name: String, f: &dyn Fn(&super::PixelResult) -> f64| AnyChannel::new(name.as_str(), FlatSamples::F32(img.pixels.iter().map(|p| f(p) as f32).collect()));
     let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
-    for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
+    for (c, name) in ["X", "Y", "Z"].iter().enumerate().filter(|_| xyz) {
         list.push(chan(name.to_string(), &move |p| p.xyz[c]));
         list.push(chan(format!("stderr.{name}"), &move |p| p.xyz_stderr[c]));
     }
