@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets validate
+.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets validate fuzz
 
 all: build
 
@@ -67,3 +67,8 @@ sunsets: build
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build
 	$(CARGO) test --release --locked --test disort -- --ignored --nocapture
+
+# Long fuzzing of the atmosphere loader and of a worker's farm-message
+# checks (tests/fuzz.rs; `make test` runs a short version of each).
+fuzz:
+	$(CARGO) test --release --locked --test fuzz -- --ignored --nocapture

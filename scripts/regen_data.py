@@ -296,7 +296,7 @@ def ozone_xs(ar: Archives, out: Path) -> None:
         point = float(s[ki == 100 * lam][0])
         rel = spot[lam] / e - 1
         print(f"  O3 {lam} nm: box {spot[lam]:.4g}, point {point:.4g}, "
-              f"DATA-SOURCES {e:.3g} ({rel * 100:+.2f}%)")
+              f"expected {e:.3g} ({rel * 100:+.2f}%)")
         if abs(rel) > 0.01:
             raise ValueError(f"O3 spot value at {lam} nm off by {rel:.3%}")
     part = "; ".join(f"bin {lam} nm has {n} samples (data end at 830.00 nm)"
@@ -563,7 +563,7 @@ def earthlib(ar: Archives, out: Path) -> None:
                        for i in idx})
         for lam, e in expect.items():
             v = float(med[wl == lam][0])
-            print(f"  {label} median {lam} nm: {v:.3f} (DATA-SOURCES {e})")
+            print(f"  {label} median {lam} nm: {v:.3f} (expected {e})")
             if abs(v - e) > 0.002:
                 raise ValueError(f"{label} median at {lam} nm is {v}, expected {e}")
         # Linear interpolation onto a 5 nm grid; held at the 400 nm value below.
@@ -612,7 +612,7 @@ def snow(ar: Archives, out: Path) -> None:
     alb = np.exp(-np.sqrt(alpha))
     got = {lam: float(alb[ALBEDO_GRID == lam][0]) for lam in (450, 550, 650)}
     for lam, e in {450: 0.996, 550: 0.982, 650: 0.960}.items():
-        print(f"  snow albedo {lam} nm: {got[lam]:.4f} (DATA-SOURCES {e})")
+        print(f"  snow albedo {lam} nm: {got[lam]:.4f} (expected {e})")
         if abs(got[lam] - e) > 0.0006:
             raise ValueError(f"snow albedo at {lam} nm is {got[lam]}, expected {e}")
     rows = [[str(int(x)), g(v, 6)] for x, v in zip(ALBEDO_GRID, alb)]

@@ -10,6 +10,8 @@ use sky::farm::proto;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 const SKY: &str = env!("CARGO_BIN_EXE_sky");
@@ -201,28 +203,84 @@ fn a_killed_coordinator_resumes_without_rendering_twice() {
     assert!(by_workers >= rendered && (dup > 0 || by_workers == rendered), "{s}");
 }
 
+/// Kills and reaps a child process however the test ends (a panicking
+/// assertion included).
+struct Reap(Option<Child>);
+
+impl Reap {
+    /// Waits for the child and takes its output.
+    fn output(mut self) -> Output {
+        self.0.take().unwrap().wait_with_output().unwrap()
+    }
+}
+
+impl Drop for Reap {
+    fn drop(&mut self) {
+        if let Some(c) = &mut self.0 {
+            let _ = c.kill();
+            let _ = c.wait();
+        }
+    }
+}
+
 #[test]
 fn verification_catches_a_worker_with_wrong_results() {
+    use proto::{ControlAction, ControlRequest};
     let mut farm = Farm::new();
     let local = farm.local("local.exr");
-    farm.start("a", &[]);
-    farm.start("b", &[]);
-    farm.start("liar", &["--fault-perturb"]);
-    let o = farm.render("farm.exr", &[0, 1, 2], &["--json-progress", "--verify-fraction", "1"]);
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    let liar = farm.start("liar", &["--fault-perturb"]);
+    // First phase: the honest workers are paused, so the liar renders
+    // every column there is (its tiles are wrong by one ulp in their first
+    // value). Paused workers stay in the farm: the coordinator keeps the
+    // liar's columns queued for verification until someone else is back.
+    for w in [a, b] {
+        unsafe {
+            libc::kill(farm.workers[w].child.id() as i32, libc::SIGUSR1);
+        }
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let mut args = render_args(&farm.path("farm.exr"));
+    args.extend(["--workers".to_string(), farm.list(&[a, b, liar]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    args.extend(["--json-progress", "--verify-fraction", "1"].map(String::from));
+    let render = Reap(Some(Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()));
+    // Wait (via the liar's Control RPC, which with no action only reports)
+    // until the liar has delivered the whole image.
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    let uri = format!("http://{}", farm.workers[liar].addr);
+    let (tasks, columns) = rt.block_on(async {
+        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        for _ in 0..600 {
+            let r = c.control(ControlRequest { action: ControlAction::Unspecified as i32 }).await.unwrap().into_inner();
+            if r.columns_done >= 32 {
+                return (r.tasks_done, r.columns_done);
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        panic!("the liar did not render the image alone within a minute");
+    });
+    assert!(tasks >= 1 && columns >= 32, "{tasks} tasks, {columns} columns");
+    // Second phase: the honest workers come back and verify.
+    for w in [a, b] {
+        unsafe {
+            libc::kill(farm.workers[w].child.id() as i32, libc::SIGUSR2);
+        }
+    }
+    let o = render.output();
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")), "a wrong result got through");
     let s = summary(&o);
     let workers = s["farm"]["workers"].as_array().unwrap();
-    let liar = workers.iter().find(|w| w["address"] == farm.workers[2].addr).unwrap();
-    // Whatever the liar touched (its own columns, or columns it was asked
-    // to verify) came out as a mismatch, and a third opinion convicted it;
-    // the honest workers were never blamed.
-    if liar["tasks_done"].as_u64().unwrap() > 0 {
-        assert!(liar["quarantined"].as_str().unwrap_or("").contains("differed bit for bit"), "{s}");
-        assert!(s["farm"]["verify_mismatches"].as_u64().unwrap() >= 1, "{s}");
-    }
-    for honest in &workers[..2] {
-        assert!(honest["quarantined"].is_null(), "{s}");
+    let w_liar = workers.iter().find(|w| w["address"] == farm.workers[liar].addr).unwrap();
+    // The liar's columns came out as mismatches when rendered again, a
+    // third opinion convicted it, and the honest workers were never blamed.
+    assert!(w_liar["tasks_done"].as_u64().unwrap() >= 1, "{s}");
+    assert!(w_liar["quarantined"].as_str().unwrap_or("").contains("differed bit for bit"), "{s}");
+    assert!(s["farm"]["verify_mismatches"].as_u64().unwrap() >= 1, "{s}");
+    for honest in [a, b] {
+        let w = workers.iter().find(|w| w["address"] == farm.workers[honest].addr).unwrap();
+        assert!(w["quarantined"].is_null(), "{s}");
     }
     assert!(s["farm"]["columns_verified"].as_u64().unwrap() >= 1, "{s}");
 }
@@ -427,9 +485,10 @@ fn schedule_and_owner_load_pause_a_worker() {
     // The load policy: the other tests' workers turn it off; this one keeps it.
     let polite = farm.spawn(&["--owner-load-limit", "0.3", "--name", "polite"]);
     let polite_addr = farm.workers[polite].addr.clone();
-    // The owner's programs: one busy loop per core.
+    // The owner's programs: one busy loop per core, stopped and joined when
+    // `_hogs` drops, also when an assertion below fails.
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(2);
-    let mut hogs: Vec<Child> = (0..cores).map(|_| Command::new("sh").args(["-c", "while :; do :; done"]).spawn().unwrap()).collect();
+    let _hogs = Hogs::start(cores);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     let hello = || proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
     let result = rt.block_on(async {
@@ -447,9 +506,39 @@ fn schedule_and_owner_load_pause_a_worker() {
         }
         Err("the worker never paused under load")
     });
-    for h in &mut hogs {
-        let _ = h.kill();
-        let _ = h.wait();
-    }
     assert_eq!(result, Ok("load".to_string()));
+}
+
+/// Busy threads standing in for the owner's programs (the worker's load
+/// policy reads the whole machine's CPU time); dropping this stops and
+/// joins them, so a failing test does not leave them spinning.
+struct Hogs {
+    stop: Arc<AtomicBool>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
+impl Hogs {
+    fn start(n: usize) -> Hogs {
+        let stop = Arc::new(AtomicBool::new(false));
+        let threads = (0..n)
+            .map(|_| {
+                let stop = stop.clone();
+                std::thread::spawn(move || {
+                    while !stop.load(Ordering::Relaxed) {
+                        std::hint::spin_loop();
+                    }
+                })
+            })
+            .collect();
+        Hogs { stop, threads }
+    }
+}
+
+impl Drop for Hogs {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
 }

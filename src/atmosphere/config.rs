@@ -117,6 +117,10 @@ struct RawSun {
     angular_diameter_deg: Option<S<f64>>,
 }
 
+/// The highest top of the atmosphere, km: the U.S. Standard 1976 ends at
+/// 1000 km.
+pub const MAX_TOP_KM: f64 = 1000.0;
+
 /// 1 Dobson unit in molecules per m².
 pub const DOBSON_UNIT_M2: f64 = 2.6867e20;
 
@@ -237,7 +241,13 @@ pub(super) fn parse(path: &Path, text: &str, files: Option<&BTreeMap<String, Vec
         Some(p) => {
             let p = p.get_ref();
             let radius_km = positive(&mut ctx, &p.radius_km, "planet.radius_km", 6371.0);
-            let top_km = positive(&mut ctx, &p.top_km, "planet.top_km", 100.0);
+            let mut top_km = positive(&mut ctx, &p.top_km, "planet.top_km", 100.0);
+            if let Some(t) = p.top_km.as_ref().filter(|_| top_km > MAX_TOP_KM) {
+                // Column integrals take 5 m steps up to the top: 1e300 km
+                // would never finish (or allocate its nodes).
+                ctx.err(t, format!("planet.top_km must be at most {MAX_TOP_KM} km (where the U.S. Standard 1976 ends), found {top_km}"));
+                top_km = 100.0;
+            }
             let geometry = match &p.geometry {
                 None => Geometry::Spherical,
                 Some(g) => match g.get_ref().as_str() {

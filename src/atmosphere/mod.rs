@@ -171,11 +171,24 @@ pub struct Bundle {
     pub files: std::collections::BTreeMap<String, Vec<u8>>,
 }
 
+/// An atmosphere file's text; text that is not UTF-8 is an error at the
+/// line of its first bad byte.
+fn read_text(path: &Path) -> Result<String, LoadError> {
+    let fail = |line, message| LoadError { errors: vec![Located { path: path.to_path_buf(), line, message }] };
+    let bytes = std::fs::read(path).map_err(|e| fail(None, format!("cannot read: {e}")))?;
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let bytes = e.as_bytes();
+        let line = bytes[..at].iter().filter(|&&b| b == b'\n').count() + 1;
+        let col = at - bytes[..at].iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1) + 1;
+        fail(Some(line), format!("not UTF-8 text: byte {:#04x} at column {col}", bytes[at]))
+    })
+}
+
 impl Atmosphere {
     /// Loads and validates an atmosphere file.
     pub fn load(path: &Path) -> Result<Atmosphere, LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }] })?;
-        Atmosphere::from_str(path, &text)
+        Atmosphere::from_str(path, &read_text(path)?)
     }
 
     /// Parses atmosphere text; `path` names it in errors and anchors its
@@ -187,7 +200,7 @@ impl Atmosphere {
     /// Loads an atmosphere file with every data file it reads, so that it
     /// can travel in a farm job (see [`Atmosphere::from_bundle`]).
     pub fn load_bundle(path: &Path) -> Result<(Atmosphere, Bundle), LoadError> {
-        let text = std::fs::read_to_string(path).map_err(|e| LoadError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read: {e}") }] })?;
+        let text = read_text(path)?;
         let (atm, files) = config::parse(path, &text, None)?;
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         Ok((atm, Bundle { name, text, files }))

@@ -211,16 +211,7 @@ impl Worker for Service {
         let peer = request.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
         let task = request.into_inner();
         let s = self.shared.clone();
-        if task.protocol_version != s.protocol_version() {
-            return Err(Status::failed_precondition(format!("this worker speaks farm protocol {}, the task protocol {}", s.protocol_version(), task.protocol_version)));
-        }
-        if task.build_version != super::build_version() {
-            return Err(Status::failed_precondition(format!(
-                "this worker is sky {}, the task is from sky {}: only the same build renders bit-identically",
-                super::build_version(),
-                task.build_version
-            )));
-        }
+        check_task(&task, s.protocol_version())?;
         if let Some(reason) = s.paused_reason() {
             return Err(Status::unavailable(format!("paused ({reason})")));
         }
@@ -233,12 +224,6 @@ impl Worker for Service {
         let prepared = s.scene(&task.job_hash);
         if prepared.is_none() && task.job.is_none() {
             return Err(Status::not_found(format!("job {} is unknown to this worker; send it with the task", task.job_hash)));
-        }
-        if let Some(j) = &task.job {
-            let h = job::hash(j);
-            if h != task.job_hash {
-                return Err(Status::invalid_argument(format!("the task's job hashes to {h}, not the {} it claims", task.job_hash)));
-            }
         }
         if s.config.faults.sigkill_on_task == Some(started) {
             eprintln!("sky worker {}: killing itself mid-task (fault injection)", s.config.name);
@@ -268,6 +253,42 @@ impl Worker for Service {
         });
         Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx))))
     }
+}
+
+/// The checks a task passes before a worker takes it: the farm protocol
+/// (`protocol_version`, this worker's), the build, and the hash of the job
+/// it carries, if any.
+pub fn check_task(task: &proto::RenderTask, protocol_version: u32) -> Result<(), Status> {
+    if task.protocol_version != protocol_version {
+        return Err(Status::failed_precondition(format!("this worker speaks farm protocol {protocol_version}, the task protocol {}", task.protocol_version)));
+    }
+    if task.build_version != super::build_version() {
+        return Err(Status::failed_precondition(format!("this worker is sky {}, the task is from sky {}: only the same build renders bit-identically", super::build_version(), task.build_version)));
+    }
+    if let Some(j) = &task.job {
+        let h = job::hash(j);
+        if h != task.job_hash {
+            return Err(Status::invalid_argument(format!("the task's job hashes to {h}, not the {} it claims", task.job_hash)));
+        }
+    }
+    Ok(())
+}
+
+/// Unpacks a job a task carries: the atmosphere (from the job's own
+/// files), the settings, and the prepared optics if it has them.
+pub fn open_job(j: &proto::Job) -> Result<(crate::atmosphere::Atmosphere, Settings, Option<Scene>), Status> {
+    let (atm, settings) = job::open(j).map_err(|e| Status::invalid_argument(e.to_string()))?;
+    let scene = job::scene(j).map_err(|e| Status::invalid_argument(e.to_string()))?;
+    Ok((atm, settings, scene))
+}
+
+/// The task's columns, checked against the job's width.
+pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, usize), Status> {
+    let (first, count) = (task.first_column as usize, task.columns as usize);
+    if count == 0 || first + count > width {
+        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the job's {width} columns")));
+    }
+    Ok((first, count))
 }
 
 /// Runs one task to its tile, heartbeating through `tx`.
@@ -301,8 +322,8 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
             let j = task.job.clone().expect("checked by the caller");
             let shared = s.clone();
             let work = tokio::task::spawn_blocking(move || -> Result<Arc<(Scene, Settings)>, Status> {
-                let (atm, settings) = job::open(&j).map_err(|e| Status::invalid_argument(e.to_string()))?;
-                let scene = match job::scene(&j).map_err(|e| Status::invalid_argument(e.to_string()))? {
+                let (atm, settings, scene) = open_job(&j)?;
+                let scene = match scene {
                     Some(s) => s,
                     None => shared.pool.install(|| Scene::new(&atm, &settings, &shared.config.cache, &|| {})),
                 };
@@ -317,10 +338,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
         }
     };
     let settings = &scene.1;
-    let (first, count) = (task.first_column as usize, task.columns as usize);
-    if count == 0 || first + count > settings.width {
-        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the job's {} columns", settings.width)));
-    }
+    let (first, count) = task_columns(&task, settings.width)?;
     let work = {
         let (s2, scene, cancel, pixels) = (s.clone(), scene.clone(), cancel.clone(), pixels.clone());
         tokio::task::spawn_blocking(move || {

@@ -15,8 +15,10 @@
 //! extinction and scattered energy are made of, optionally truncated to a
 //! radius range (OPAC's components are defined between r_min and r_max,
 //! Hess et al. 1998, Table 1); truncation does not renormalise the number
-//! density. The resulting accuracy is checked against miepython on dense
-//! grids in `tests/mie_reference.rs`.
+//! density. The resulting accuracy (without truncation) is checked against
+//! miepython 3.3.0 integrated on a converged dense grid by
+//! `mie_lognormal_matches_dense_miepython_integration` in
+//! `tests/reference_physics.rs` (values in `tests/reference/mie_lognormal.json`).
 
 use super::bhmie;
 use num_complex::Complex64 as C64;
