@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets validate fuzz
+.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
 
 all: build
 
@@ -63,6 +63,22 @@ sunsets: build
 	done
 	python3 scripts/contact_sheet.py docs/images/sunsets.png 2 \
 	  $(foreach e,10 2 0 -4,docs/images/sunset_clear_$(e).png docs/images/sunset_hazed_$(e).png)
+
+# The README's overcast skies: the six cloudy basis skies, fisheye, sun at
+# 30 (top row) and 80 degrees zenith (bottom row). Thick layers are noisy at
+# these sample counts (see the README).
+CLOUDY_SIZE ?= 32x32
+CLOUDY_SPP ?= 512
+cloudy: build
+	@mkdir -p docs/images $(OUT)
+	for zen in 30 80; do \
+	  for c in 0 1 2 3 4 5; do \
+	    $(SKY) render atmospheres/cloudy$$c.toml --camera fisheye --size $(CLOUDY_SIZE) --sun-zenith-deg $$zen --spp $(CLOUDY_SPP) --denoise \
+	      --out $(OUT)/cloudy$${c}_sun$${zen}.exr --png docs/images/cloudy$${c}_sun$${zen}.png --json > $(OUT)/cloudy$${c}_sun$${zen}.json || exit 1; \
+	  done; \
+	done
+	python3 scripts/contact_sheet.py docs/images/cloudy.png 6 \
+	  $(foreach z,30 80,$(foreach c,0 1 2 3 4 5,docs/images/cloudy$(c)_sun$(z).png))
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build

@@ -33,8 +33,9 @@ struct Stats {
     family: Family,
     beyond_tolerance_precise: Vec<String>,
     precise: usize,
-    /// Core-seconds of rendering per case label.
-    seconds: Vec<(String, f64)>,
+    /// Core-seconds of rendering per case label, and the largest relative
+    /// standard error of its directions.
+    seconds: Vec<(String, f64, f64)>,
 }
 
 /// Compares every case of `reference` (a JSON file under tests/reference)
@@ -66,8 +67,10 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
         let scene = Scene::new(&atm, &settings, &cache, &|| {});
         let t0 = std::time::Instant::now();
         let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
-        st.seconds.push((format!("{} {l} nm", atm.name), t0.elapsed().as_secs_f64() * rayon::current_num_threads() as f64));
+        let core_s = t0.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
         let e_sun = atm.sun.irradiance_w_m2_nm.eval(l);
+        let worst = img.pixels.iter().zip(&expect).map(|(px, want)| px.spectral_stderr[0] / e_sun / want).fold(0.0, f64::max);
+        st.seconds.push((format!("{} {l} nm", atm.name), core_s, worst));
         for (k, px) in img.pixels.iter().enumerate() {
             let ours = px.spectral[0] / e_sun;
             let se = px.spectral_stderr[0] / e_sun;
@@ -90,8 +93,12 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
 
 fn check(st: &Stats, compared: usize, min_precise: usize, tolerance: f64) {
     eprintln!("{} compared, aggregate Σz/√m {:+.2}, {} with se < {:.2} %", st.family.z.len(), st.family.aggregate(), st.precise, 100.0 * tolerance / 3.0);
-    for (label, s) in &st.seconds {
-        eprintln!("  {label}: {s:.1} core-seconds");
+    // The variance falls as 1/n, so the worst direction reaches a relative
+    // standard error of tolerance / 2 (a 2-sigma interval within the
+    // tolerance) after (worst / (tolerance / 2))² times the samples.
+    for (label, s, worst) in &st.seconds {
+        let to_tolerance = s * (worst / (tolerance / 2.0)).powi(2);
+        eprintln!("  {label}: {s:.1} core-seconds, worst relative standard error {:.2} %: {to_tolerance:.0} core-seconds for {:.1} % on every direction", 100.0 * worst, 100.0 * tolerance / 2.0);
     }
     assert_eq!(st.family.z.len(), compared);
     assert!(st.precise >= min_precise, "too few precise comparisons to test the {} % criterion", 100.0 * tolerance);

@@ -92,6 +92,26 @@ pub enum BenchCommand {
         #[arg(long)]
         json: bool,
     },
+    /// The bias of adaptive sampling on heavy-tailed pixels (the hazed sky
+    /// next to the sun, a cloudy sky, hazy twilight): many independent
+    /// pixels looking the same way, each rendered with fixed samples, with
+    /// the two-stage rule `--max-rel-error` ships, and with the rule it
+    /// replaced (stop once the running standard error meets the target,
+    /// checked every 16 samples: emulated exactly, since a pixel's first k
+    /// samples do not depend on how many it takes); reports each mean's
+    /// difference from an independent fixed-sample reference in standard
+    /// errors
+    Adaptive {
+        /// Pixels per case
+        #[arg(long, default_value_t = 100)]
+        pixels: usize,
+        /// The relative standard error asked for
+        #[arg(long, default_value_t = 0.1)]
+        target: f64,
+        /// Most samples a pixel may take (and the fixed-sample count)
+        #[arg(long, default_value_t = 512)]
+        spp: u32,
+    },
     /// The farm's overhead and scaling, in one run: a plain local render (no
     /// coordinator) against the embedded worker and against one `sky worker`
     /// process on the same cores; then two single-thread workers against one.
@@ -282,6 +302,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        BenchCommand::Adaptive { pixels, target, spp } => adaptive(pixels, target, spp),
         BenchCommand::Disort { reference, case, spp, threads, json } => disort(&reference, &case, spp, threads, json),
         BenchCommand::Spectral { atmosphere, spp } => {
             let atm = Atmosphere::load(&atmosphere).map_err(anyhow::Error::new).with_context(|| format!("{}", atmosphere.display()))?;
@@ -515,6 +536,60 @@ fn disort(reference: &std::path::Path, case: &str, spp: u32, threads: usize, jso
         outln!("{case} against DISORT: {directions} directions x {} wavelengths, {spp} spp, spectral lines only, {threads} thread(s)", rows.len());
         outln!("  render {seconds:.2} s; relative RMSE {:.3} % (noise {:.3} %, beyond the noise {:.3} %)", 100.0 * rmse, 100.0 * noise, 100.0 * floor);
         outln!("  time to 1 % relative RMSE (noise): {to_one_percent:.2} s");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `sky bench adaptive` (see its help).
+fn adaptive(pixels: usize, target: f64, spp: u32) -> Result<ExitCode> {
+    if pixels < 2 || !(target > 0.0 && target < 1.0) || spp < 2 * rend::ADAPTIVE_PILOT_SPP {
+        return super::usage(format!("need --pixels >= 2, 0 < --target < 1 and --spp >= {}", 2 * rend::ADAPTIVE_PILOT_SPP));
+    }
+    let cache = sky::mie::MieCache::from_env();
+    // (atmosphere, sun zenith, view zenith, view azimuth from the sun)
+    let cases = [("atmospheres/hazed.toml", 60.0, 63.0, 0.0), ("atmospheres/cloudy3.toml", 60.0, 40.0, 0.0), ("atmospheres/hazed.toml", 94.0, 80.0, 0.0)];
+    outln!("adaptive sampling on heavy-tailed pixels: {pixels} pixels per case, target {target}, at most {spp} samples; mean Y and its difference from a fixed-sample reference");
+    for (path, sun, zen, az) in cases {
+        let atm = Atmosphere::load(std::path::Path::new(path)).map_err(anyhow::Error::new).with_context(|| path.to_string())?;
+        let base = Settings { xyz: true, wavelength_sampling: WavelengthSampling::Hero, ..Settings::directions(vec![(zen, az); pixels], sun, vec![], spp, 11, false) };
+        let scene = Scene::new(&atm, &base, &cache, &|| {});
+        let render = |s: &Settings| rend::render(&scene, s, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+        // Mean over pixels, its standard error, and the mean samples taken.
+        let stats = |values: &[f64], taken: f64| {
+            let n = values.len() as f64;
+            let mean = values.iter().sum::<f64>() / n;
+            let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            (mean, (var / n).sqrt(), taken)
+        };
+        let of = |img: &rend::Image| -> (Vec<f64>, f64) { (img.pixels.iter().map(|p| p.xyz[1]).collect(), img.pixels.iter().map(|p| p.samples as f64).sum::<f64>() / pixels as f64) };
+        let (v, t) = of(&render(&Settings { seed: 1011, ..base.clone() }));
+        let reference = stats(&v, t);
+        let (v, t) = of(&render(&base));
+        let fixed = stats(&v, t);
+        let (v, t) = of(&render(&Settings { max_rel_error: Some(target), ..base.clone() }));
+        let two_stage = stats(&v, t);
+        // The old rule: a pixel's estimate after its first k samples is the
+        // fixed render at k samples; it stopped at the first k (from 32,
+        // every 16) whose running error met the target.
+        let mut old: Vec<Option<(f64, u32)>> = vec![None; pixels];
+        let mut k = 32;
+        while k < spp && old.iter().any(|o| o.is_none()) {
+            let img = render(&Settings { spp: k, ..base.clone() });
+            for (o, p) in old.iter_mut().zip(&img.pixels) {
+                if o.is_none() && (p.xyz[1] <= 0.0 || p.xyz_stderr[1] <= target * p.xyz[1]) {
+                    *o = Some((p.xyz[1], k));
+                }
+            }
+            k += 16;
+        }
+        let full = render(&base);
+        let old: Vec<(f64, u32)> = old.iter().zip(&full.pixels).map(|(o, p)| o.unwrap_or((p.xyz[1], spp))).collect();
+        let old_rule = stats(&old.iter().map(|o| o.0).collect::<Vec<_>>(), old.iter().map(|o| o.1 as f64).sum::<f64>() / pixels as f64);
+        outln!("  {path}, sun zenith {sun} deg, view ({zen}, {az}) deg: reference {:.5e} ± {:.1e}", reference.0, reference.1);
+        for (name, (m, se, taken)) in [("fixed", fixed), ("two stages", two_stage), ("old rule", old_rule)] {
+            let z = (m - reference.0) / (se * se + reference.1 * reference.1).sqrt();
+            outln!("    {name:<11} {m:.5e} ± {se:.1e}  ({:+.2} %, z {z:+.2})  {taken:.0} samples per pixel", 100.0 * (m / reference.0 - 1.0));
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
