@@ -64,9 +64,9 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
         // A seed per case, so the cases' errors are independent.
         let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, 2023 + case_index as u64, false);
         let cache = MieCache::new(None);
-        let scene = Scene::new(&atm, &settings, &cache, &|| {});
+        let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let t0 = std::time::Instant::now();
-        let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+        let img = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
         let core_s = t0.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
         let e_sun = atm.sun.irradiance_w_m2_nm.eval(l);
         let worst = img.pixels.iter().zip(&expect).map(|(px, want)| px.spectral_stderr[0] / e_sun / want).fold(0.0, f64::max);

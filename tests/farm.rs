@@ -415,7 +415,7 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
     // A long task: four directions at a million samples each.
     let (_, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let mut settings = sky::render::Settings::directions(vec![(60.0, 0.0), (70.0, 90.0), (80.0, 180.0), (85.0, 0.0)], 60.0, vec![], 1_000_000, 1, false);
-    settings.xyz = true;
+    settings.spectral.xyz = true;
     let job = sky::farm::job::make(&bundle, &settings, None);
     let hash = sky::farm::job::hash(&job);
     let task = |id: u64, job: Option<proto::Job>| proto::RenderTask {

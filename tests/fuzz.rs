@@ -363,7 +363,7 @@ fn worker_takes(task: &proto::RenderTask) -> Result<bool, String> {
     let Some(j) = &task.job else { return Ok(false) };
     match worker::open_job(j) {
         Err(s) => status(s),
-        Ok((_, settings, _)) => match worker::task_columns(task, settings.width) {
+        Ok((_, settings, _)) => match worker::task_columns(task, settings.view.width) {
             Err(s) => status(s),
             Ok(_) => Ok(false),
         },

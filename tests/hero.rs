@@ -32,10 +32,16 @@ fn hero_agrees_with_single_band_at_47_nm_bands() {
     let dirs: Vec<(f64, f64)> = [0.0, 30.0, 60.0, 80.0].iter().flat_map(|&z| [0.0, 60.0, 120.0, 180.0].map(|a| (z, a))).collect();
     let cache = MieCache::new(None);
     let run = |ws: WavelengthSampling, spp: u32, seed: u64| {
-        let s = Settings { xyz: true, band_nm: 47.0, wavelength_sampling: ws, ..Settings::directions(dirs.clone(), 60.0, vec![], spp, seed, false) };
-        let scene = Scene::new(&atm, &s, &cache, &|| {});
+        let s = {
+            let mut s_ = Settings::directions(dirs.clone(), 60.0, vec![], spp, seed, false);
+            s_.spectral.xyz = true;
+            s_.spectral.band_nm = 47.0;
+            s_.spectral.wavelength_sampling = ws;
+            s_
+        };
+        let scene = Scene::new(&atm, &s.spectral, &cache, &|| {});
         assert_eq!(scene.bands.len(), 10);
-        render::render(&scene, &s, &AtomicBool::new(false), &|| {}).unwrap()
+        render::render(&scene, &s.view, &AtomicBool::new(false), &|| {}).unwrap()
     };
     let hero = run(WavelengthSampling::Hero, 40_000, 31);
     let single = run(WavelengthSampling::Tristimulus, 80_000, 32);

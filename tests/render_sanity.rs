@@ -9,7 +9,7 @@ use sky::render::camera::{direction_deg, Camera};
 use sky::render::medium::Medium;
 use sky::render::rng::Rng;
 use sky::render::tracer::{Estimator, Tracer};
-use sky::render::{self, Scene, Settings, WavelengthSampling};
+use sky::render::{self, Scene, Settings, SpectralSettings, View, WavelengthSampling};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -98,8 +98,8 @@ fn conserves_energy(text: &str, n: u64) {
 fn ground_radiance(atm: &Atmosphere, view: (f64, f64), sun_zenith: f64, spp: u32, seed: u64) -> (f64, f64) {
     let settings = Settings::directions(vec![view], sun_zenith, vec![550.0], spp, seed, false);
     let cache = MieCache::new(None);
-    let scene = Scene::new(atm, &settings, &cache, &|| {});
-    let img = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+    let scene = Scene::new(atm, &settings.spectral, &cache, &|| {});
+    let img = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
     (img.pixels[0].spectral[0], img.pixels[0].spectral_stderr[0])
 }
 
@@ -130,31 +130,30 @@ fn reciprocity_spot_checks() {
 fn renders_are_deterministic_across_threads_and_splits() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let settings = Settings {
-        camera: Camera::Fisheye,
-        width: 9,
-        height: 7,
-        sun_zenith_deg: 80.0,
-        sun_azimuth_deg: 30.0,
-        altitude_m: 100.0,
-        spp: 8,
-        seed: 77,
-        spectral_nm: vec![500.0],
-        xyz: true,
-        band_nm: 47.0,
-        wavelength_sampling: WavelengthSampling::Tristimulus,
-        estimator: Estimator::Full,
-        sun_disk: true,
-        max_rel_error: None,
+        spectral: SpectralSettings { spectral_nm: vec![500.0], xyz: true, band_nm: 47.0, wavelength_sampling: WavelengthSampling::Tristimulus },
+        view: View {
+            camera: Camera::Fisheye,
+            width: 9,
+            height: 7,
+            sun_zenith_deg: 80.0,
+            sun_azimuth_deg: 30.0,
+            altitude_m: 100.0,
+            spp: 8,
+            seed: 77,
+            estimator: Estimator::Full,
+            sun_disk: true,
+            max_rel_error: None,
+        },
     };
     let cache = MieCache::new(None);
-    let scene = Scene::new(&atm, &settings, &cache, &|| {});
+    let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-    let a = one.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
-    let b = two.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
+    let a = one.install(|| render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap());
+    let b = two.install(|| render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap());
     assert!(a == b, "1 and 2 threads differ");
     for i in [0, 5, 31, 62] {
-        assert!(render::render_pixel(&scene, &settings, i) == a.pixels[i], "pixel {i} alone differs");
+        assert!(render::render_pixel(&scene, &settings.view, i) == a.pixels[i], "pixel {i} alone differs");
     }
     assert!(a.pixels.iter().any(|p| p.xyz[1] > 0.0));
 }
@@ -195,25 +194,24 @@ fn adaptive_sampling_meets_its_target() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let target = 0.08;
     let settings = Settings {
-        camera: Camera::Fisheye,
-        width: 10,
-        height: 10,
-        sun_zenith_deg: 75.0,
-        sun_azimuth_deg: 0.0,
-        altitude_m: 0.0,
-        spp: 2048,
-        seed: 3,
-        spectral_nm: vec![],
-        xyz: true,
-        band_nm: 47.0,
-        wavelength_sampling: WavelengthSampling::Tristimulus,
-        estimator: Estimator::Full,
-        sun_disk: true,
-        max_rel_error: Some(target),
+        spectral: SpectralSettings { spectral_nm: vec![], xyz: true, band_nm: 47.0, wavelength_sampling: WavelengthSampling::Tristimulus },
+        view: View {
+            camera: Camera::Fisheye,
+            width: 10,
+            height: 10,
+            sun_zenith_deg: 75.0,
+            sun_azimuth_deg: 0.0,
+            altitude_m: 0.0,
+            spp: 2048,
+            seed: 3,
+            estimator: Estimator::Full,
+            sun_disk: true,
+            max_rel_error: Some(target),
+        },
     };
     let cache = MieCache::new(None);
-    let scene = Scene::new(&atm, &settings, &cache, &|| {});
-    let a = render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap();
+    let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
+    let a = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
     let lit: Vec<_> = a.pixels.iter().filter(|p| p.samples > 0).collect();
     assert!(lit.len() > 50);
     // The count comes from a pilot's variance (unbiased, see
@@ -235,7 +233,7 @@ fn adaptive_sampling_meets_its_target() {
     let (lo, hi) = (lit.iter().map(|p| p.samples).min().unwrap(), lit.iter().map(|p| p.samples).max().unwrap());
     assert!(hi > 2 * lo, "samples should follow the noise: {lo}..{hi}");
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
-    let b = one.install(|| render::render(&scene, &settings, &AtomicBool::new(false), &|| {}).unwrap());
+    let b = one.install(|| render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap());
     assert!(a == b);
 }
 
@@ -251,9 +249,14 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
     for (name, sun_zenith, dirs, spp) in cases {
         let atm = Atmosphere::load(&root().join(format!("atmospheres/{name}.toml"))).unwrap();
         let run = |ws: WavelengthSampling, seed: u64| {
-            let s = Settings { xyz: true, wavelength_sampling: ws, ..Settings::directions(dirs.clone(), sun_zenith, vec![], spp, seed, false) };
-            let scene = Scene::new(&atm, &s, &cache, &|| {});
-            render::render(&scene, &s, &AtomicBool::new(false), &|| {}).unwrap()
+            let s = {
+                let mut s_ = Settings::directions(dirs.clone(), sun_zenith, vec![], spp, seed, false);
+                s_.spectral.xyz = true;
+                s_.spectral.wavelength_sampling = ws;
+                s_
+            };
+            let scene = Scene::new(&atm, &s.spectral, &cache, &|| {});
+            render::render(&scene, &s.view, &AtomicBool::new(false), &|| {}).unwrap()
         };
         let hero = run(WavelengthSampling::Hero, 21);
         let single = run(WavelengthSampling::Tristimulus, 22);

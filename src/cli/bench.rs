@@ -7,7 +7,7 @@ use sky::atmosphere::RefractiveIndex;
 use sky::mie::{self, phase, LogNormal};
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
-use sky::render::{self as rend, Scene, Settings, WavelengthSampling};
+use sky::render::{self as rend, Scene, Settings, SpectralSettings, View, WavelengthSampling};
 use sky::table::Table;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -182,21 +182,20 @@ fn farm_seconds(
 
 fn sunset_settings(spp: u32, seed: u64) -> Settings {
     Settings {
-        camera: Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: 12.0, fov_deg: 90.0 },
-        width: 48,
-        height: 24,
-        sun_zenith_deg: 85.0,
-        sun_azimuth_deg: 0.0,
-        altitude_m: 0.0,
-        spp,
-        seed,
-        spectral_nm: vec![],
-        xyz: true,
-        band_nm: 5.0,
-        wavelength_sampling: WavelengthSampling::Tristimulus,
-        estimator: Estimator::Full,
-        sun_disk: true,
-        max_rel_error: None,
+        spectral: SpectralSettings { spectral_nm: vec![], xyz: true, band_nm: 5.0, wavelength_sampling: WavelengthSampling::Tristimulus },
+        view: View {
+            camera: Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: 12.0, fov_deg: 90.0 },
+            width: 48,
+            height: 24,
+            sun_zenith_deg: 85.0,
+            sun_azimuth_deg: 0.0,
+            altitude_m: 0.0,
+            spp,
+            seed,
+            estimator: Estimator::Full,
+            sun_disk: true,
+            max_rel_error: None,
+        },
     }
 }
 
@@ -231,11 +230,15 @@ struct Measured {
 }
 
 fn measure(atm: &Atmosphere, estimator: Estimator, spp: u32, seed: u64) -> Measured {
-    let settings = Settings { estimator, ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![550.0], spp, seed, true) };
+    let settings = {
+        let mut s_ = Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![550.0], spp, seed, true);
+        s_.view.estimator = estimator;
+        s_
+    };
     let cache = sky::mie::MieCache::from_env();
-    let scene = Scene::new(atm, &settings, &cache, &|| {});
+    let scene = Scene::new(atm, &settings.spectral, &cache, &|| {});
     let t = Instant::now();
-    let img = rend::render(&scene, &settings, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+    let img = rend::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).expect("not cancelled");
     let seconds = t.elapsed().as_secs_f64();
     let n = spp as f64;
     let mean: Vec<f64> = img.pixels.iter().map(|p| p.spectral[0]).collect();
@@ -310,10 +313,16 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             outln!("colour noise per second, {} ({} directions, sun at 60 deg, {spp} spp, {} threads)", atmosphere.display(), BENCH_DIRECTIONS.len(), rayon::current_num_threads());
             let mut results = Vec::new();
             for (name, ws) in [("luminance", WavelengthSampling::Luminance), ("tristimulus", WavelengthSampling::Tristimulus), ("hero", WavelengthSampling::Hero)] {
-                let settings = Settings { xyz: true, spectral_nm: vec![], wavelength_sampling: ws, ..Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![], spp, 7, false) };
-                let scene = Scene::new(&atm, &settings, &cache, &|| {});
+                let settings = {
+                    let mut s_ = Settings::directions(BENCH_DIRECTIONS.to_vec(), 60.0, vec![], spp, 7, false);
+                    s_.spectral.xyz = true;
+                    s_.spectral.spectral_nm = vec![];
+                    s_.spectral.wavelength_sampling = ws;
+                    s_
+                };
+                let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
                 let t = Instant::now();
-                let img = rend::render(&scene, &settings, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+                let img = rend::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).expect("not cancelled");
                 let secs = t.elapsed().as_secs_f64();
                 let noise: f64 = img.pixels.iter().map(|p| (0..3).map(|c| (p.xyz_stderr[c] / p.xyz[c]).powi(2)).sum::<f64>()).sum::<f64>() / img.pixels.len() as f64;
                 outln!("  {name:<12} {secs:>7.2} s   mean Σ(rel. se)² {noise:.3e}   noise x time {:.3e}", noise * secs);
@@ -330,10 +339,10 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let cache = sky::mie::MieCache::from_env();
             let low = sunset_settings(spp, 1);
             let high = sunset_settings(reference_spp, 2);
-            let scene = Scene::new(&atm, &low, &cache, &|| {});
+            let scene = Scene::new(&atm, &low.spectral, &cache, &|| {});
             let cancel = AtomicBool::new(false);
-            let noisy = rend::render(&scene, &low, &cancel, &|| {}).expect("not cancelled");
-            let reference = rend::render(&scene, &high, &cancel, &|| {}).expect("not cancelled");
+            let noisy = rend::render(&scene, &low.view, &cancel, &|| {}).expect("not cancelled");
+            let reference = rend::render(&scene, &high.view, &cancel, &|| {}).expect("not cancelled");
             let den = rend::denoise::Denoise::default().apply(&noisy);
             let (e_raw, c_raw, b_raw) = image_error(&noisy, &reference);
             let (e_den, c_den, b_den) = image_error(&den, &reference);
@@ -403,14 +412,14 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
             let (atm, bundle) = Atmosphere::load_bundle(&atmosphere).map_err(anyhow::Error::new)?;
             let mut settings = Settings::directions(Vec::new(), 70.0, Vec::new(), spp, 1, true);
-            settings.camera = Camera::Equirect;
-            settings.width = w;
-            settings.height = h;
-            settings.xyz = true;
-            settings.wavelength_sampling = WavelengthSampling::Hero;
+            settings.view.camera = Camera::Equirect;
+            settings.view.width = w;
+            settings.view.height = h;
+            settings.spectral.xyz = true;
+            settings.spectral.wavelength_sampling = WavelengthSampling::Hero;
             let cache = sky::mie::MieCache::from_env();
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-            let scene = Arc::new(pool.install(|| Scene::new(&atm, &settings, &cache, &|| {})));
+            let scene = Arc::new(pool.install(|| Scene::new(&atm, &settings.spectral, &cache, &|| {})));
             let message = sky::farm::job::make(&bundle, &settings, Some(&scene));
             let job = Arc::new(FarmJob { hash: sky::farm::job::hash(&message), message, settings: settings.clone() });
             let token = format!("bench-{}", std::process::id());
@@ -429,7 +438,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             for _ in 0..rounds {
                 // 1. Overhead, on the same cores.
                 let t = Instant::now();
-                pool.install(|| rend::render(&scene, &settings, &AtomicBool::new(false), &|| {})).map_err(|e| anyhow::anyhow!("{e}"))?;
+                pool.install(|| rend::render(&scene, &settings.view, &AtomicBool::new(false), &|| {})).map_err(|e| anyhow::anyhow!("{e}"))?;
                 t_plain = t_plain.min(t.elapsed().as_secs_f64());
                 t_embedded = t_embedded.min(farm_seconds(&rt, &job, vec![WorkerSpec::Local { threads }], Some(scene.clone()), &token)?);
                 t_remote = t_remote.min(farm_seconds(&rt, &job, vec![remote(&big)], None, &token)?);
@@ -503,9 +512,9 @@ fn disort(reference: &std::path::Path, case: &str, spp: u32, threads: usize, jso
         }
         directions = dirs.len();
         let settings = Settings::directions(dirs, num(&c["sun_zenith_deg"])?, vec![l], spp, 2023 + k as u64, false);
-        let scene = Scene::new(&atm, &settings, &cache, &|| {});
+        let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let t = Instant::now();
-        let img = pool.install(|| rend::render(&scene, &settings, &AtomicBool::new(false), &|| {})).expect("not cancelled");
+        let img = pool.install(|| rend::render(&scene, &settings.view, &AtomicBool::new(false), &|| {})).expect("not cancelled");
         seconds += t.elapsed().as_secs_f64();
         let e_sun = atm.sun.irradiance_w_m2_nm.eval(l);
         for (p, w) in img.pixels.iter().zip(&want) {
@@ -551,9 +560,14 @@ fn adaptive(pixels: usize, target: f64, spp: u32) -> Result<ExitCode> {
     outln!("adaptive sampling on heavy-tailed pixels: {pixels} pixels per case, target {target}, at most {spp} samples; mean Y and its difference from a fixed-sample reference");
     for (path, sun, zen, az) in cases {
         let atm = Atmosphere::load(std::path::Path::new(path)).map_err(anyhow::Error::new).with_context(|| path.to_string())?;
-        let base = Settings { xyz: true, wavelength_sampling: WavelengthSampling::Hero, ..Settings::directions(vec![(zen, az); pixels], sun, vec![], spp, 11, false) };
-        let scene = Scene::new(&atm, &base, &cache, &|| {});
-        let render = |s: &Settings| rend::render(&scene, s, &AtomicBool::new(false), &|| {}).expect("not cancelled");
+        let base = {
+            let mut s_ = Settings::directions(vec![(zen, az); pixels], sun, vec![], spp, 11, false);
+            s_.spectral.xyz = true;
+            s_.spectral.wavelength_sampling = WavelengthSampling::Hero;
+            s_
+        };
+        let scene = Scene::new(&atm, &base.spectral, &cache, &|| {});
+        let render = |s: &Settings| rend::render(&scene, &s.view, &AtomicBool::new(false), &|| {}).expect("not cancelled");
         // Mean over pixels, its standard error, and the mean samples taken.
         let stats = |values: &[f64], taken: f64| {
             let n = values.len() as f64;
@@ -562,11 +576,19 @@ fn adaptive(pixels: usize, target: f64, spp: u32) -> Result<ExitCode> {
             (mean, (var / n).sqrt(), taken)
         };
         let of = |img: &rend::Image| -> (Vec<f64>, f64) { (img.pixels.iter().map(|p| p.xyz[1]).collect(), img.pixels.iter().map(|p| p.samples as f64).sum::<f64>() / pixels as f64) };
-        let (v, t) = of(&render(&Settings { seed: 1011, ..base.clone() }));
+        let (v, t) = of(&render(&{
+            let mut s_ = base.clone();
+            s_.view.seed = 1011;
+            s_
+        }));
         let reference = stats(&v, t);
         let (v, t) = of(&render(&base));
         let fixed = stats(&v, t);
-        let (v, t) = of(&render(&Settings { max_rel_error: Some(target), ..base.clone() }));
+        let (v, t) = of(&render(&{
+            let mut s_ = base.clone();
+            s_.view.max_rel_error = Some(target);
+            s_
+        }));
         let two_stage = stats(&v, t);
         // The old rule: a pixel's estimate after its first k samples is the
         // fixed render at k samples; it stopped at the first k (from 32,
@@ -574,7 +596,11 @@ fn adaptive(pixels: usize, target: f64, spp: u32) -> Result<ExitCode> {
         let mut old: Vec<Option<(f64, u32)>> = vec![None; pixels];
         let mut k = 32;
         while k < spp && old.iter().any(|o| o.is_none()) {
-            let img = render(&Settings { spp: k, ..base.clone() });
+            let img = render(&{
+                let mut s_ = base.clone();
+                s_.view.spp = k;
+                s_
+            });
             for (o, p) in old.iter_mut().zip(&img.pixels) {
                 if o.is_none() && (p.xyz[1] <= 0.0 || p.xyz_stderr[1] <= target * p.xyz[1]) {
                     *o = Some((p.xyz[1], k));

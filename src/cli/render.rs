@@ -11,7 +11,7 @@ use sky::farm::{config, job, journal};
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
-use sky::render::{self, output, Scene, Settings, WavelengthSampling};
+use sky::render::{self, output, Scene, Settings, SpectralSettings, View, WavelengthSampling};
 use sky::table::Table;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -304,25 +304,29 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         }
     };
     let settings = Settings {
-        camera,
-        width,
-        height,
-        sun_zenith_deg: a.sun_zenith_deg,
-        sun_azimuth_deg: a.sun_azimuth_deg,
-        altitude_m: a.altitude_m,
-        spp: a.spp,
-        seed: a.seed,
-        spectral_nm: a.spectral_nm.clone(),
-        xyz: !a.no_xyz,
-        band_nm: a.band_nm,
-        wavelength_sampling: match a.wavelength_sampling {
-            Sampling::Luminance => WavelengthSampling::Luminance,
-            Sampling::Tristimulus => WavelengthSampling::Tristimulus,
-            Sampling::Hero => WavelengthSampling::Hero,
+        spectral: SpectralSettings {
+            spectral_nm: a.spectral_nm.clone(),
+            xyz: !a.no_xyz,
+            band_nm: a.band_nm,
+            wavelength_sampling: match a.wavelength_sampling {
+                Sampling::Luminance => WavelengthSampling::Luminance,
+                Sampling::Tristimulus => WavelengthSampling::Tristimulus,
+                Sampling::Hero => WavelengthSampling::Hero,
+            },
         },
-        estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
-        sun_disk: !a.hide_sun_disk,
-        max_rel_error: a.max_rel_error,
+        view: View {
+            camera,
+            width,
+            height,
+            sun_zenith_deg: a.sun_zenith_deg,
+            sun_azimuth_deg: a.sun_azimuth_deg,
+            altitude_m: a.altitude_m,
+            spp: a.spp,
+            seed: a.seed,
+            estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
+            sun_disk: !a.hide_sun_disk,
+            max_rel_error: a.max_rel_error,
+        },
     };
     let cancel = Arc::new(AtomicBool::new(false));
     {
@@ -336,10 +340,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let scene = {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
         let cache = MieCache::from_env();
-        let steps = Scene::steps(&atm, &settings);
+        let steps = Scene::steps(&atm, &settings.spectral);
         let prep = ProgressBar::new(steps as u64);
         prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
-        let scene = pool.install(|| Scene::new(&atm, &settings, &cache, &|| prep.inc(1)));
+        let scene = pool.install(|| Scene::new(&atm, &settings.spectral, &cache, &|| prep.inc(1)));
         prep.finish_and_clear();
         Arc::new(scene)
     };
@@ -411,8 +415,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let render_s = t0.elapsed().as_secs_f64();
     let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
     let paths_cut: u64 = image.pixels.iter().map(|p| p.paths_cut as u64).sum();
-    let samples = taken * (1 + settings.spectral_nm.len()) as f64;
-    let camera_desc = match &settings.camera {
+    let samples = taken * (1 + settings.spectral.spectral_nm.len()) as f64;
+    let camera_desc = match &settings.view.camera {
         Camera::Equirect => "equirect".to_string(),
         Camera::Fisheye => "fisheye".to_string(),
         Camera::Pinhole { azimuth_deg, elevation_deg, fov_deg } => format!("pinhole azimuth {azimuth_deg} deg, elevation {elevation_deg} deg, fov {fov_deg} deg"),
@@ -445,7 +449,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         (image, None)
     };
     if let Some(o) = &a.out {
-        output::write_exr(o, &image, noisy.as_ref(), settings.xyz, &settings.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
+        output::write_exr(o, &image, noisy.as_ref(), settings.spectral.xyz, &settings.spectral.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
         if let Some(j) = &journal_path {
             let _ = std::fs::remove_file(j);
         }
@@ -465,10 +469,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             "paths_per_second": samples / render_s.max(1e-9),
             "paths_cut": paths_cut,
             "y_relative_stderr": relative_stderr_summary(&image),
-            "spectral_nm": settings.spectral_nm,
+            "spectral_nm": settings.spectral.spectral_nm,
             "farm": farm_stats,
         });
-        if let Camera::Directions(list) = &settings.camera {
+        if let Camera::Directions(list) = &settings.view.camera {
             v["directions"] = json!(list
                 .iter()
                 .zip(&image.pixels)

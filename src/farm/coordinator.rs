@@ -616,12 +616,12 @@ pub async fn run(
     cancel: Arc<AtomicBool>,
 ) -> Result<Outcome, FarmError> {
     let s = &job.settings;
-    let (width, height) = (s.width as u32, s.height as u32);
-    let lines = s.spectral_nm.len() as u32;
+    let (width, height) = (s.view.width as u32, s.view.height as u32);
+    let lines = s.spectral.spectral_nm.len() as u32;
     let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
     let mut stats = Stats { columns_total: width, ..Default::default() };
     for (c, t) in &resumed {
-        let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.spp };
+        let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
         if let Ok(mut cols) = tile::decode(t, &want) {
             if (*c as usize) < columns.len() {
                 columns[*c as usize] = cols.pop();
@@ -930,7 +930,8 @@ impl Backend {
 
     async fn run(&mut self, t: &Assignment, job: &FarmJob, opts: &Options, (inflight, preparing): (&Arc<AtomicU64>, &AtomicBool), stop: &AtomicBool) -> Result<Vec<Vec<PixelResult>>, TaskError> {
         let s = &job.settings;
-        let want = tile::Expect { job_hash: &job.hash, task_id: t.id, first_column: t.first, columns: t.count, height: s.height as u32, lines: s.spectral_nm.len() as u32, spp: s.spp };
+        let want =
+            tile::Expect { job_hash: &job.hash, task_id: t.id, first_column: t.first, columns: t.count, height: s.view.height as u32, lines: s.spectral.spectral_nm.len() as u32, spp: s.view.spp };
         match self {
             Backend::Local { pool, scene } => {
                 let flag = Arc::new(AtomicBool::new(false));
@@ -939,7 +940,7 @@ impl Backend {
                     let (first, count) = (t.first as usize, t.count as usize);
                     tokio::task::spawn_blocking(move || {
                         pool.install(|| {
-                            render::render_columns(&scene, &job_settings, first, count, &flag, &|| {
+                            render::render_columns(&scene, &job_settings.view, first, count, &flag, &|| {
                                 inflight.fetch_add(1, Ordering::Relaxed);
                             })
                         })
@@ -957,7 +958,7 @@ impl Backend {
                 };
                 let Some(cols) = cols else { return Err(TaskError::Cancelled) };
                 // Through the wire format and its checks, like a remote tile.
-                let tile = tile::encode(&job.hash, t.id, t.first, s.height as u32, s.spectral_nm.len(), &cols);
+                let tile = tile::encode(&job.hash, t.id, t.first, s.view.height as u32, s.spectral.spectral_nm.len(), &cols);
                 tile::decode(&tile, &want).map_err(|e| TaskError::Failed(format!("invalid result: {e}")))
             }
             Backend::Remote { uri, client, has_job, .. } => {

@@ -57,8 +57,8 @@ pub fn open(job: &proto::Job) -> Result<(Atmosphere, Settings), JobError> {
         return Err(JobError::Build { theirs: job.build_version.clone(), ours: super::build_version() });
     }
     let settings: Settings = serde_json::from_str(&job.settings_json).map_err(|e| JobError::Settings(e.to_string()))?;
-    if settings.width == 0 || settings.height == 0 || settings.spp == 0 {
-        return Err(JobError::Settings(format!("empty image {}x{} at {} spp", settings.width, settings.height, settings.spp)));
+    if settings.view.width == 0 || settings.view.height == 0 || settings.view.spp == 0 {
+        return Err(JobError::Settings(format!("empty image {}x{} at {} spp", settings.view.width, settings.view.height, settings.view.spp)));
     }
     let bundle = Bundle { name: job.atmosphere_name.clone(), text: job.atmosphere_toml.clone(), files: job.files.iter().map(|f| (f.name.clone(), f.content.clone())).collect() };
     let atm = Atmosphere::from_bundle(&bundle).map_err(|e| JobError::Atmosphere(e.to_string()))?;
@@ -77,7 +77,7 @@ mod tests {
         let (atm, bundle) = Atmosphere::load_bundle(&path).unwrap();
         assert!(bundle.files.len() >= 3, "{:?}", bundle.files.keys());
         let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
-        s.camera = Camera::Fisheye;
+        s.view.camera = Camera::Fisheye;
         let job = make(&bundle, &s, None);
         assert_eq!(hash(&job), hash(&make(&bundle, &s, None)));
         assert!(scene(&job).unwrap().is_none());
@@ -99,9 +99,9 @@ mod tests {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/analytic-hg.toml");
         let (atm, bundle) = Atmosphere::load_bundle(&path).unwrap();
         let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
-        s.xyz = true;
-        s.band_nm = 20.0;
-        let scene = Scene::new(&atm, &s, &crate::mie::MieCache::new(None), &|| {});
+        s.spectral.xyz = true;
+        s.spectral.band_nm = 20.0;
+        let scene = Scene::new(&atm, &s.spectral, &crate::mie::MieCache::new(None), &|| {});
         let job = make(&bundle, &s, Some(&scene));
         let back = super::scene(&job).unwrap().expect("carried");
         assert_eq!(postcard::to_stdvec(&back).unwrap(), job.scene);

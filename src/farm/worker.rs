@@ -325,7 +325,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
                 let (atm, settings, scene) = open_job(&j)?;
                 let scene = match scene {
                     Some(s) => s,
-                    None => shared.pool.install(|| Scene::new(&atm, &settings, &shared.config.cache, &|| {})),
+                    None => shared.pool.install(|| Scene::new(&atm, &settings.spectral, &shared.config.cache, &|| {})),
                 };
                 Ok(Arc::new((scene, settings)))
             });
@@ -338,12 +338,12 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
         }
     };
     let settings = &scene.1;
-    let (first, count) = task_columns(&task, settings.width)?;
+    let (first, count) = task_columns(&task, settings.view.width)?;
     let work = {
         let (s2, scene, cancel, pixels) = (s.clone(), scene.clone(), cancel.clone(), pixels.clone());
         tokio::task::spawn_blocking(move || {
             s2.pool.install(|| {
-                render::render_columns(&scene.0, &scene.1, first, count, &cancel, &|| {
+                render::render_columns(&scene.0, &scene.1.view, first, count, &cancel, &|| {
                     pixels.fetch_add(1, Ordering::Relaxed);
                 })
             })
@@ -355,7 +355,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };
-    let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, settings.height as u32, settings.spectral_nm.len(), &columns);
+    let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, settings.view.height as u32, settings.spectral.spectral_nm.len(), &columns);
     if s.config.faults.corrupt_tiles {
         t.values[0] = f64::NAN;
     }

@@ -57,10 +57,22 @@ pub enum WavelengthSampling {
     Hero,
 }
 
-/// Everything that defines a render besides the atmosphere (serialised
-/// into farm jobs).
+/// What the optics depend on besides the atmosphere: the input of
+/// [`Scene::new`], so that one prepared scene serves any number of views.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Settings {
+pub struct SpectralSettings {
+    /// Width of the spectral bands of the XYZ estimate, nm.
+    pub band_nm: f64,
+    pub wavelength_sampling: WavelengthSampling,
+    /// Extra channels: spectral radiance at these wavelengths.
+    pub spectral_nm: Vec<f64>,
+    /// Whether to estimate XYZ at all (validation runs may want only spectral channels).
+    pub xyz: bool,
+}
+
+/// What one view of a prepared scene adds: camera, sun, observer, sampling.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct View {
     pub camera: Camera,
     pub width: usize,
     pub height: usize,
@@ -69,12 +81,6 @@ pub struct Settings {
     pub altitude_m: f64,
     pub spp: u32,
     pub seed: u64,
-    /// Extra channels: spectral radiance at these wavelengths.
-    pub spectral_nm: Vec<f64>,
-    /// Whether to estimate XYZ at all (validation runs may want only spectral channels).
-    pub xyz: bool,
-    pub band_nm: f64,
-    pub wavelength_sampling: WavelengthSampling,
     pub estimator: Estimator,
     /// Whether camera rays see the sun's disk (off for comparisons with
     /// codes that report only diffuse radiance).
@@ -85,6 +91,21 @@ pub struct Settings {
     /// of its value (see [`adaptive_samples`]); `spp` is then the most a
     /// pixel may take, pilot included.
     pub max_rel_error: Option<f64>,
+}
+
+impl View {
+    /// Unit vector toward the sun.
+    pub fn sun_direction(&self) -> DVec3 {
+        camera::direction_deg(self.sun_zenith_deg, self.sun_azimuth_deg)
+    }
+}
+
+/// Everything that defines a render besides the atmosphere (serialised
+/// into farm jobs): the optics' input and the view.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Settings {
+    pub spectral: SpectralSettings,
+    pub view: View,
 }
 
 /// A pixel's running sums.
@@ -110,26 +131,21 @@ impl Settings {
     /// unless `sun_disk`: the setting of validations and benchmarks.
     pub fn directions(dirs: Vec<(f64, f64)>, sun_zenith_deg: f64, spectral_nm: Vec<f64>, spp: u32, seed: u64, sun_disk: bool) -> Settings {
         Settings {
-            width: dirs.len(),
-            height: 1,
-            camera: Camera::Directions(dirs),
-            sun_zenith_deg,
-            sun_azimuth_deg: 0.0,
-            altitude_m: 0.0,
-            spp,
-            seed,
-            spectral_nm,
-            xyz: false,
-            band_nm: 5.0,
-            wavelength_sampling: WavelengthSampling::Luminance,
-            estimator: Estimator::Full,
-            sun_disk,
-            max_rel_error: None,
+            spectral: SpectralSettings { band_nm: 5.0, wavelength_sampling: WavelengthSampling::Luminance, spectral_nm, xyz: false },
+            view: View {
+                width: dirs.len(),
+                height: 1,
+                camera: Camera::Directions(dirs),
+                sun_zenith_deg,
+                sun_azimuth_deg: 0.0,
+                altitude_m: 0.0,
+                spp,
+                seed,
+                estimator: Estimator::Full,
+                sun_disk,
+                max_rel_error: None,
+            },
         }
-    }
-
-    pub fn sun_direction(&self) -> DVec3 {
-        camera::direction_deg(self.sun_zenith_deg, self.sun_azimuth_deg)
     }
 }
 
@@ -144,12 +160,14 @@ pub struct Scene {
     pub band_optics: Vec<Spectral>,
     pub line_optics: Vec<Spectral>,
     pub sun_angular_diameter_deg: f64,
+    /// What the optics were prepared for.
+    pub spectral: SpectralSettings,
 }
 
 impl Scene {
     /// Computes the optics (Mie tables come from `cache`); `on_step` is
     /// called after each wavelength, for progress.
-    pub fn new(atm: &Atmosphere, s: &Settings, cache: &MieCache, on_step: &(dyn Fn() + Sync)) -> Scene {
+    pub fn new(atm: &Atmosphere, s: &SpectralSettings, cache: &MieCache, on_step: &(dyn Fn() + Sync)) -> Scene {
         let medium = Medium::new(atm);
         let columns = ColumnTable::new(&medium);
         let bands = Bands::new(atm, s.band_nm, s.wavelength_sampling);
@@ -173,11 +191,11 @@ impl Scene {
                 o
             })
             .collect();
-        Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg }
+        Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg, spectral: s.clone() }
     }
 
     /// How many wavelengths `new` evaluates (for a progress bar).
-    pub fn steps(atm: &Atmosphere, s: &Settings) -> usize {
+    pub fn steps(atm: &Atmosphere, s: &SpectralSettings) -> usize {
         let b = if s.xyz { Bands::new(atm, s.band_nm, s.wavelength_sampling).len() } else { 0 };
         b + s.spectral_nm.len()
     }
@@ -215,7 +233,7 @@ pub struct PixelTracers<'a> {
 }
 
 impl<'a> PixelTracers<'a> {
-    pub fn new(scene: &'a Scene, s: &Settings) -> PixelTracers<'a> {
+    pub fn new(scene: &'a Scene, s: &View) -> PixelTracers<'a> {
         let sun = s.sun_direction();
         let make = |o: &'a Spectral| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns);
         let band: Vec<Tracer> = scene.band_optics.iter().map(make).collect();
@@ -227,18 +245,18 @@ impl<'a> PixelTracers<'a> {
 
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
-pub fn render_pixel(scene: &Scene, s: &Settings, pixel: usize) -> PixelResult {
+pub fn render_pixel(scene: &Scene, s: &View, pixel: usize) -> PixelResult {
     render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, &AtomicBool::new(false))
 }
 
 /// [`render_pixel`] that stops early (with a partial, discarded result)
 /// when `cancel` is set, so Ctrl-C does not wait for long pixels.
-pub fn render_pixel_cancellable(scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
+pub fn render_pixel_cancellable(scene: &Scene, s: &View, pixel: usize, cancel: &AtomicBool) -> PixelResult {
     render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, cancel)
 }
 
 /// [`render_pixel_cancellable`] with the render's shared tracers.
-pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pixel: usize, cancel: &AtomicBool) -> PixelResult {
+pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel: usize, cancel: &AtomicBool) -> PixelResult {
     let (x, y) = (pixel % s.width, pixel / s.width);
     let nl = scene.line_optics.len();
     let mut empty = PixelResult { xyz: [0.0; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![0.0; nl], spectral_stderr: vec![0.0; nl], samples: 0, paths_cut: 0 };
@@ -272,13 +290,13 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
     let mut sample = |k: u64, acc: &mut Accumulator| {
         let (xyz, direct, lines) = (&mut acc.xyz, &mut acc.direct, &mut acc.lines);
         acc.taken += 1;
-        if s.xyz {
+        if scene.spectral.xyz {
             let mut rng = Rng::new(s.seed, pixel as u64, k);
             let kf = k as f64;
             let (jx, jy) = if jitter { ((s_x + kf * R2_A1).fract(), (s_y + kf * R2_A2).fract()) } else { (0.5, 0.5) };
             let u_band = (s_band + kf * R1_A).fract();
             let dir = s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height);
-            match (s.wavelength_sampling, dir) {
+            match (scene.spectral.wavelength_sampling, dir) {
                 (WavelengthSampling::Hero, Some(d)) => {
                     acc.any = true;
                     let set = scene.bands.hero_set(u_band);
@@ -347,7 +365,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
                 sample(k, &mut pilot);
             }
             let left = s.spp - ADAPTIVE_PILOT_SPP;
-            let n = match if s.xyz { Some(&pilot.xyz[1]) } else { pilot.lines.first() } {
+            let n = match if scene.spectral.xyz { Some(&pilot.xyz[1]) } else { pilot.lines.first() } {
                 Some(m) => adaptive_samples(m, target, left),
                 None => left,
             };
@@ -393,7 +411,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &Settings, pi
 /// None if `cancel` was set. Pixels are the same pure function of (scene,
 /// settings, pixel) as in [`render`], so a column is bit-identical wherever
 /// it is rendered.
-pub fn render_columns(scene: &Scene, s: &Settings, first: usize, count: usize, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Option<Vec<Vec<PixelResult>>> {
+pub fn render_columns(scene: &Scene, s: &View, first: usize, count: usize, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Option<Vec<Vec<PixelResult>>> {
     use rayon::prelude::*;
     let h = s.height;
     let tracers = PixelTracers::new(scene, s);
@@ -437,7 +455,7 @@ pub enum RenderError {
 
 /// Renders every pixel on the current rayon pool. `on_pixel` is called after
 /// each pixel (for progress); `cancel` stops the render.
-pub fn render(scene: &Scene, s: &Settings, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<Image, RenderError> {
+pub fn render(scene: &Scene, s: &View, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<Image, RenderError> {
     use rayon::prelude::*;
     let n = s.width * s.height;
     let tracers = PixelTracers::new(scene, s);
