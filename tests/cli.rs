@@ -162,6 +162,9 @@ fn render_writes_exr_png_and_json() {
     assert!(o.status.success(), "{:?}", text(&o));
     let v: Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["width"], 12);
+    // stderr is not a terminal here: progress comes as plain lines.
+    let err = text(&o).1;
+    assert!(err.lines().any(|l| l.starts_with("sky render: ") && l.contains(" px), ") && l.contains("ETA")), "no progress line: {err}");
     assert!(std::fs::read(&png_path).unwrap().starts_with(b"\x89PNG"));
     use exr::prelude::*;
     let img = read_all_flat_layers_from_file(&exr_path).unwrap();

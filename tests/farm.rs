@@ -172,7 +172,9 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     assert!(g["quarantined"].is_string(), "{g}");
     assert_eq!(g["columns_done"], 0, "{g}");
     assert!(s["farm"]["requeued"].as_u64().unwrap() >= 3, "{s}");
-    assert!(stderr(&o).contains("invalid result: tile value 0 is NaN"), "{}", stderr(&o));
+    // With --json-progress the farm's events are JSON lines on stdout.
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.lines().any(|l| l.contains("\"event\":\"quarantined\"") && l.contains("invalid result: tile value 0 is NaN")), "no quarantine event for the garbage worker in\n{out}");
     // The stalled worker never delivered; its task was re-queued after the
     // lease or duplicated and won elsewhere.
     let st = workers.iter().find(|w| w["address"] == farm.workers[2].addr).unwrap();
@@ -507,6 +509,30 @@ fn schedule_and_owner_load_pause_a_worker() {
         Err("the worker never paused under load")
     });
     assert_eq!(result, Ok("load".to_string()));
+    // A render on the paused worker alone says why it waits, in its log
+    // (stderr is not a terminal here), instead of waiting in silence.
+    let mut args = render_args(&farm.path("waiting.exr"));
+    args.extend(["--workers".to_string(), farm.list(&[off_hours]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    let mut child = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let err = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut said = None;
+    while let Ok(line) = rx.recv_timeout(Duration::from_secs(60)) {
+        if line.contains("waiting: no worker can render") {
+            said = Some(line);
+            break;
+        }
+    }
+    let _ = child.kill();
+    let _ = child.wait();
+    let said = said.expect("the render never said why it waits");
+    assert!(said.contains("off-hours: paused (schedule)"), "{said}");
 }
 
 /// Busy threads standing in for the owner's programs (the worker's load

@@ -16,6 +16,7 @@ macro_rules! outln {
 mod atmosphere;
 mod bench;
 mod mie;
+mod progress;
 mod render;
 mod worker;
 

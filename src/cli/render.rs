@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use sky::atmosphere::Atmosphere;
-use sky::farm::coordinator::{self, FarmError, FarmJob, Options, ProgressMode, WorkerSpec};
+use sky::farm::coordinator::{self, FarmError, FarmJob, Options, WorkerSpec};
 use sky::farm::{config, job, journal};
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
@@ -357,7 +357,8 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if let Some(l) = a.lease_s {
         opts.lease = std::time::Duration::from_secs_f64(l);
     }
-    opts.progress = if a.json_progress { ProgressMode::Json } else { ProgressMode::Bars };
+    let view = super::progress::View::new(super::progress::Style::choose(a.json_progress));
+    opts.events = Some(view.sink.clone());
     opts.fault_kill_after_columns = a.fault_kill_after_columns;
     let prep_s = start.elapsed().as_secs_f64();
     let message = job::make(&bundle, &settings, Some(&scene));
@@ -389,6 +390,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let outcome = rt.block_on(coordinator::run(job.clone(), workers, Some(scene), resumed, journal, opts, cancel.clone()));
     rt.shutdown_background();
+    view.finish();
     let outcome = match outcome {
         Ok(o) => o,
         Err(FarmError::Cancelled) => {

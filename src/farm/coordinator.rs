@@ -22,6 +22,7 @@
 //! The embedded local worker goes through the same scheduler, so a local
 //! render and a farm render are the same code path and bit-identical.
 
+use super::events::{self, EventSink, FarmEvent, Progress};
 use super::journal::Journal;
 use super::proto::worker_client::WorkerClient;
 use super::proto::{self, render_event::Event, WorkerState};
@@ -64,16 +65,6 @@ fn address_of(uri: &str) -> String {
     uri.trim_start_matches("http://").trim_start_matches("https://").trim_end_matches('/').to_string()
 }
 
-/// How progress is shown.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ProgressMode {
-    None,
-    /// indicatif bars on stderr: overall, and a line per worker.
-    Bars,
-    /// One JSON object per line on stdout, every second.
-    Json,
-}
-
 /// Farm policy.
 #[derive(Debug, Clone)]
 pub struct Options {
@@ -91,7 +82,10 @@ pub struct Options {
     pub max_worker_failures: usize,
     pub token: Option<String>,
     pub tls: Option<ClientTlsConfig>,
-    pub progress: ProgressMode,
+    /// Where progress and worker events go (none: silent).
+    pub events: Option<EventSink>,
+    /// How often progress is reported.
+    pub progress_period: Duration,
     /// Fault injection for tests: SIGKILL this process once the journal
     /// holds at least this many columns.
     pub fault_kill_after_columns: Option<u32>,
@@ -108,7 +102,8 @@ impl Default for Options {
             max_worker_failures: 3,
             token: None,
             tls: None,
-            progress: ProgressMode::None,
+            events: None,
+            progress_period: Duration::from_secs(1),
             fault_kill_after_columns: None,
         }
     }
@@ -376,7 +371,9 @@ impl Sched {
         if self.workers[w].quarantined.is_some() {
             return;
         }
-        eprintln!("sky render: worker {} quarantined for this job: {why}", self.workers[w].name);
+        if let Some(e) = &self.opts.events {
+            e.emit(&FarmEvent::Quarantined { worker: self.workers[w].name.clone(), why: why.clone() });
+        }
         self.workers[w].quarantined = Some(why);
         self.workers[w].state = "quarantined".into();
         if self.live_workers() == 0 && !self.complete() && self.fatal.is_none() {
@@ -542,7 +539,9 @@ impl Sched {
             TaskError::Paused(reason) => self.workers[w].state = format!("paused ({reason})"),
             TaskError::Refused(msg) => self.quarantine(w, msg),
             TaskError::Failed(msg) => {
-                eprintln!("sky render: worker {}: {msg}", self.workers[w].name);
+                if let Some(e) = &self.opts.events {
+                    e.emit(&FarmEvent::TaskFailed { worker: self.workers[w].name.clone(), message: msg.clone() });
+                }
                 self.workers[w].failures += 1;
                 if let Some((first, count)) = columns {
                     for c in first..first + count {
@@ -669,7 +668,7 @@ pub async fn run(
         changed: Notify::new(),
         cancel: cancel.clone(),
     });
-    let progress = tokio::spawn(show_progress(shared.clone(), opts.progress, width as u64 * height as u64));
+    let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period, width as u64 * height as u64));
     let mut drivers = Vec::new();
     for (w, spec) in workers.into_iter().enumerate() {
         let (shared, job, opts, local_scene) = (shared.clone(), job.clone(), opts.clone(), local_scene.clone());
@@ -1011,34 +1010,10 @@ impl Backend {
     }
 }
 
-/// Shows progress until aborted.
-async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u64) {
-    use indicatif::{MultiProgress, ProgressBar, ProgressStyle};
-    if mode == ProgressMode::None {
-        return;
-    }
+/// Reports progress every `period` until aborted.
+async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: Duration, total_pixels: u64) {
+    let Some(sink) = sink else { return };
     let started = Instant::now();
-    let (multi, main, lines) = if mode == ProgressMode::Bars {
-        let multi = MultiProgress::new();
-        let main = multi.add(ProgressBar::new(total_pixels));
-        main.set_style(ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} px  {msg}").unwrap());
-        let n = shared.sched.lock().unwrap().workers.len();
-        let lines: Vec<ProgressBar> = if n > 1 || shared.sched.lock().unwrap().workers.iter().any(|w| w.name != "local") {
-            (0..n)
-                .map(|_| {
-                    let b = multi.add(ProgressBar::new_spinner());
-                    b.set_style(ProgressStyle::with_template("  {msg}").unwrap());
-                    b
-                })
-                .collect()
-        } else {
-            Vec::new()
-        };
-        (Some(multi), Some(main), lines)
-    } else {
-        (None, None, Vec::new())
-    };
-    let period = if mode == ProgressMode::Json { Duration::from_secs(1) } else { Duration::from_millis(200) };
     let mut tick = tokio::time::interval(period);
     loop {
         tick.tick().await;
@@ -1049,58 +1024,17 @@ async fn show_progress(shared: Arc<Shared>, mode: ProgressMode, total_pixels: u6
         // ETA from each worker's measured speed (columns per second).
         let speed: f64 = stats.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.columns_per_s).sum::<f64>() * height;
         let left = total_pixels.saturating_sub(pixels) as f64;
-        let eta = (speed > 0.0).then(|| left / speed);
-        match mode {
-            ProgressMode::Json => {
-                let v = serde_json::json!({
-                    "event": "progress",
-                    "samples_per_s": stats.samples_rendered as f64 / started.elapsed().as_secs_f64().max(1e-3),
-                    "elapsed_s": started.elapsed().as_secs_f64(),
-                    "pixels_done": pixels,
-                    "pixels_total": total_pixels,
-                    "columns_done": stats.columns_resumed + stats.columns_rendered,
-                    "columns_total": stats.columns_total,
-                    "eta_s": eta,
-                    "workers": stats.workers,
-                });
-                println!("{v}");
-            }
-            _ => {
-                if let Some(main) = &main {
-                    main.set_position(pixels);
-                    let rate = stats.samples_rendered as f64 / started.elapsed().as_secs_f64().max(1e-3);
-                    main.set_message(match eta {
-                        Some(e) => format!("{} samples/s  ETA {}", fmt_rate(rate), fmt_duration(e)),
-                        None => "ETA …".into(),
-                    });
-                }
-                for (b, w) in lines.iter().zip(&stats.workers) {
-                    b.set_message(format!("{:<16} {:<21} {:<14} {:>4} tasks {:>5} columns {:>7.2} col/s", w.name, w.address, w.state, w.tasks_done, w.columns_done, w.columns_per_s));
-                    b.tick();
-                }
-            }
-        }
-        let _ = &multi;
-    }
-}
-
-fn fmt_rate(r: f64) -> String {
-    if r >= 1e6 {
-        format!("{:.1}M", r / 1e6)
-    } else if r >= 1e3 {
-        format!("{:.0}k", r / 1e3)
-    } else {
-        format!("{r:.0}")
-    }
-}
-
-fn fmt_duration(s: f64) -> String {
-    let s = s.round() as u64;
-    if s >= 3600 {
-        format!("{}h{:02}m", s / 3600, s % 3600 / 60)
-    } else if s >= 60 {
-        format!("{}m{:02}s", s / 60, s % 60)
-    } else {
-        format!("{s}s")
+        let elapsed_s = started.elapsed().as_secs_f64();
+        sink.emit(&FarmEvent::Progress(Progress {
+            elapsed_s,
+            samples_per_s: stats.samples_rendered as f64 / elapsed_s.max(1e-3),
+            pixels_done: pixels,
+            pixels_total: total_pixels,
+            columns_done: stats.columns_resumed + stats.columns_rendered,
+            columns_total: stats.columns_total,
+            eta_s: (speed > 0.0).then(|| left / speed),
+            stalled: events::stalled(&stats.workers),
+            workers: stats.workers,
+        }));
     }
 }

@@ -14,6 +14,7 @@
 
 pub mod config;
 pub mod coordinator;
+pub mod events;
 pub mod job;
 pub mod journal;
 pub mod tile;
