@@ -18,6 +18,7 @@ pub mod lut;
 pub mod mie;
 pub mod plot;
 pub mod render;
+pub mod session;
 pub mod spectrum;
 pub mod table;
 

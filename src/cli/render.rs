@@ -6,12 +6,13 @@ use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use sky::atmosphere::Atmosphere;
-use sky::farm::coordinator::{self, FarmError, FarmJob, Options, WorkerSpec};
-use sky::farm::{config, job, journal};
+use sky::farm::coordinator::{FarmError, Options, WorkerSpec};
+use sky::farm::{config, journal};
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
 use sky::render::{self, output, Scene, Settings, SpectralSettings, View, WavelengthSampling};
+use sky::session::{OpticsCache, Session};
 use sky::table::Table;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -335,18 +336,6 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     }
     let threads = a.threads.filter(|&t| t > 0).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let start = Instant::now();
-    // The optics are prepared here once; a farm job carries them, so every
-    // worker renders with the same numbers whatever its maths library.
-    let scene = {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-        let cache = MieCache::from_env();
-        let steps = Scene::steps(&atm, &settings.spectral);
-        let prep = ProgressBar::new(steps as u64);
-        prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
-        let scene = pool.install(|| Scene::new(&atm, &settings.spectral, &cache, &|| prep.inc(1)));
-        prep.finish_and_clear();
-        Arc::new(scene)
-    };
     let (workers, mut opts) = match plan {
         Some((w, o)) => (w, o),
         None => (vec![WorkerSpec::Local { threads }], Options::default()),
@@ -357,12 +346,33 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if let Some(l) = a.lease_s {
         opts.lease = std::time::Duration::from_secs_f64(l);
     }
-    let view = super::progress::View::new(super::progress::Style::choose(a.json_progress));
+    let style = super::progress::Style::choose(a.json_progress);
+    let view = super::progress::View::new(style);
     opts.events = Some(view.sink.clone());
     opts.fault_kill_after_columns = a.fault_kill_after_columns;
+    // The optics are prepared once, in the session; a farm job carries
+    // them, so every worker renders with the same numbers whatever its
+    // maths library.
+    let session = {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+        let cache = MieCache::from_env();
+        let steps = Scene::steps(&atm, &settings.spectral);
+        let prep = ProgressBar::new(steps as u64);
+        prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
+        if style == super::progress::Style::Lines {
+            eprintln!("sky render: preparing the optics at {steps} wavelengths");
+        }
+        let optics = OpticsCache::default();
+        let s = pool.install(|| Session::new(atm, bundle, settings.spectral.clone(), &optics, &cache, workers, opts, &|| prep.inc(1)));
+        prep.finish_and_clear();
+        if style == super::progress::Style::Lines {
+            eprintln!("sky render: optics prepared in {:.1} s", start.elapsed().as_secs_f64());
+        }
+        s
+    };
+    let atm = &session.atmosphere;
     let prep_s = start.elapsed().as_secs_f64();
-    let message = job::make(&bundle, &settings, Some(&scene));
-    let job = Arc::new(FarmJob { hash: job::hash(&message), message, settings: settings.clone() });
+    let job = session.job(&settings.view);
     // The journal next to the output: every accepted column, synced.
     let (journal, resumed) = match &a.out {
         None => (None, BTreeMap::new()),
@@ -387,12 +397,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     };
     let journal_path = journal.as_ref().map(|j| j.path().to_path_buf());
     let t0 = Instant::now();
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
-    let outcome = rt.block_on(coordinator::run(job.clone(), workers, Some(scene), resumed, journal, opts, cancel.clone()));
-    rt.shutdown_background();
+    let outcome = session.render(job.clone(), resumed, journal, cancel.clone());
     view.finish();
-    let outcome = match outcome {
-        Ok(o) => o,
+    let rendered = match outcome {
+        Ok(r) => r,
         Err(FarmError::Cancelled) => {
             match &journal_path {
                 Some(j) => eprintln!("sky render: cancelled; no image was written ({} keeps the finished columns: --resume continues)", j.display()),
@@ -405,15 +413,9 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             return Ok(ExitCode::from(EXIT_INVALID));
         }
     };
-    let mut pixels = Vec::with_capacity(width * height);
-    for y in 0..height {
-        for col in &outcome.columns {
-            pixels.push(col[y].clone());
-        }
-    }
     let n = width * height;
-    let image = render::Image { width, height, pixels };
-    let farm_stats = outcome.stats;
+    let image = rendered.image;
+    let farm_stats = rendered.stats;
     let render_s = t0.elapsed().as_secs_f64();
     let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
     let paths_cut: u64 = image.pixels.iter().map(|p| p.paths_cut as u64).sum();

@@ -126,6 +126,8 @@ pub enum FarmError {
     NoWorkers { report: String },
     #[error("journal: {0}")]
     Journal(#[from] super::journal::JournalError),
+    #[error("cannot start the farm's runtime: {0}")]
+    Runtime(std::io::Error),
 }
 
 /// One worker's figures.

@@ -1,0 +1,47 @@
+//! The library's render session: optics prepared once per atmosphere and
+//! spectral setting, any number of views rendered with them, bit-identical
+//! to rendering each view directly.
+
+use sky::atmosphere::Atmosphere;
+use sky::farm::coordinator::{Options, WorkerSpec};
+use sky::mie::MieCache;
+use sky::render::camera::Camera;
+use sky::render::{self, Settings};
+use sky::session::{optics_hash, OpticsCache, Session};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+#[test]
+fn a_session_prepares_optics_once_for_many_views() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("atmospheres/analytic-hg.toml");
+    let (atm, bundle) = Atmosphere::load_bundle(&path).unwrap();
+    let mut s = Settings::directions(vec![], 40.0, vec![550.0], 8, 3, false);
+    s.spectral.xyz = true;
+    s.spectral.band_nm = 47.0;
+    s.view.camera = Camera::Fisheye;
+    (s.view.width, s.view.height) = (6, 4);
+    let mie = MieCache::new(None);
+    let cache = OpticsCache::default();
+    let local = vec![WorkerSpec::Local { threads: 2 }];
+    let session = Session::new(atm.clone(), bundle.clone(), s.spectral.clone(), &cache, &mie, local.clone(), Options::default(), &|| {});
+    // Three views (sun zenith 20, 60, 85): the same optics, and each view
+    // bit-identical to a direct render with those optics.
+    for sun in [20.0, 60.0, 85.0] {
+        let mut view = s.view.clone();
+        view.sun_zenith_deg = sun;
+        let got = session.render_view(&view, Arc::new(AtomicBool::new(false))).unwrap();
+        let want = render::render(&session.scene, &view, &AtomicBool::new(false), &|| {}).unwrap();
+        assert!(got.image == want, "sun zenith {sun}: the session's render differs from a direct one");
+    }
+    // A second session of the same atmosphere and spectral setting prepares
+    // nothing; another spectral setting does.
+    let again = Session::new(atm.clone(), bundle.clone(), s.spectral.clone(), &cache, &mie, local.clone(), Options::default(), &|| {});
+    assert!(Arc::ptr_eq(&again.scene, &session.scene));
+    assert_eq!(cache.prepared(), 1);
+    let mut other = s.spectral.clone();
+    other.spectral_nm = vec![450.0];
+    assert_ne!(optics_hash(&atm, &other), optics_hash(&atm, &s.spectral));
+    let _ = Session::new(atm, bundle, other, &cache, &mie, local, Options::default(), &|| {});
+    assert_eq!(cache.prepared(), 2);
+}
