@@ -45,3 +45,24 @@ fn a_session_prepares_optics_once_for_many_views() {
     let _ = Session::new(atm, bundle, other, &cache, &mie, local, Options::default(), &|| {});
     assert_eq!(cache.prepared(), 2);
 }
+
+/// What a farm job of one view weighs today: the prepared optics travel in
+/// every job, so a bake-shaped run (64 views of one atmosphere) sends 64
+/// copies to each worker that renders them. A figure for the farm's issue
+/// (`cargo test --release --test session -- --ignored --nocapture`).
+#[test]
+#[ignore = "a measurement: prints the bytes of one view's job for the shipped clear sky"]
+fn job_bytes_per_view() {
+    use prost::Message;
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
+    let (atm, bundle) = Atmosphere::load_bundle(&path).unwrap();
+    let mut s = Settings::directions(vec![], 60.0, vec![], 8, 3, false);
+    s.spectral.xyz = true;
+    s.spectral.wavelength_sampling = render::WavelengthSampling::Hero;
+    s.view.camera = Camera::Equirect;
+    (s.view.width, s.view.height) = (32, 128);
+    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &MieCache::new(None), vec![], Options::default(), &|| {});
+    let job = session.job(&s.view);
+    let bytes = job.message.encoded_len();
+    eprintln!("one view's job: {bytes} bytes ({:.1} MB; prepared optics {:.1} MB); 64 views: {:.0} MB per worker", bytes as f64 / 1e6, job.message.scene.len() as f64 / 1e6, 64.0 * bytes as f64 / 1e6);
+}
