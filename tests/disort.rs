@@ -42,12 +42,13 @@ struct Stats {
 /// at the directions in `view_zeniths` x `azimuths`, with `spp_for(name)`
 /// samples; a comparison is precise when its standard error is below a
 /// third of `tolerance` (relative), and must then be within it.
-fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> u32, tolerance: f64) -> Stats {
+fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> Option<u32>, tolerance: f64) -> Stats {
     let r: Value = serde_json::from_str(&std::fs::read_to_string(root().join(reference)).unwrap()).unwrap();
     let mut st = Stats { family: Family::default(), beyond_tolerance_precise: vec![], precise: 0, seconds: vec![] };
     for (case_index, case) in r["cases"].as_array().unwrap().iter().enumerate() {
         let atm = Atmosphere::load(&root().join(case["atmosphere"].as_str().unwrap())).unwrap();
-        let spp = spp_for(&atm.name);
+        // None: this slab is not part of the run.
+        let Some(spp) = spp_for(&atm.name) else { continue };
         let l = case["wavelength_nm"].as_f64().unwrap();
         let vz: Vec<f64> = case["view_zenith_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let ra: Vec<f64> = case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
@@ -112,7 +113,7 @@ fn path_tracer_agrees_with_disort() {
     // The Rayleigh slab with enough samples that many standard errors fall
     // below 0.33 %, so the 1 % criterion is exercised; the aerosol slab is
     // noisier per sample and is held mostly to the z-score criteria.
-    let st = run("tests/reference/disort.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 90.0, 180.0], &|name| if name == "disort-rayleigh" { 80_000 } else { 20_000 }, 0.01);
+    let st = run("tests/reference/disort.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 90.0, 180.0], &|name| Some(if name == "disort-rayleigh" { 80_000 } else { 20_000 }), 0.01);
     check(&st, 2 * 3 * 12, 10, 0.01);
 }
 
@@ -121,17 +122,17 @@ fn path_tracer_agrees_with_disort() {
 fn path_tracer_agrees_with_disort_full_grid() {
     let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
     let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
-    let st = run("tests/reference/disort.json", &zs, &az, &|_| 100_000, 0.01);
+    let st = run("tests/reference/disort.json", &zs, &az, &|_| Some(100_000), 0.01);
     check(&st, 2 * 3 * 70, 100, 0.01);
 }
 
 /// Samples per direction of the cloud test, per slab.
-fn cloud_spp(name: &str) -> u32 {
-    match name {
+fn cloud_spp(name: &str) -> Option<u32> {
+    Some(match name {
         "disort-cloud-tau1" => 20_000,
         "disort-cloud-tau9" => 8_000,
         _ => 4_000,
-    }
+    })
 }
 
 #[test]
@@ -145,6 +146,21 @@ fn path_tracer_agrees_with_disort_under_clouds() {
 fn path_tracer_agrees_with_disort_under_clouds_full_grid() {
     let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
     let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
-    let st = run("tests/reference/disort_clouds.json", &zs, &az, &|name| 25 * cloud_spp(name), 0.02);
+    let st = run("tests/reference/disort_clouds.json", &zs, &az, &|name| cloud_spp(name).map(|n| 25 * n), 0.02);
     check(&st, 3 * 3 * 70, 100, 0.02);
+}
+
+/// The 2 % criterion where it can be reached in minutes: the optical depth
+/// 1 and 9 slabs at the CI test's directions, with samples for standard
+/// errors near 0.5 % (about 25 core-minutes on this project's machine).
+#[test]
+#[ignore = "the thin and middle cloud slabs converged to test the 2 % criterion: long (make validate)"]
+fn path_tracer_is_within_two_percent_of_disort_under_thin_clouds() {
+    let spp = |name: &str| match name {
+        "disort-cloud-tau1" => Some(640_000),
+        "disort-cloud-tau9" => Some(1_000_000),
+        _ => None,
+    };
+    let st = run("tests/reference/disort_clouds.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 180.0], &spp, 0.02);
+    check(&st, 2 * 3 * 8, 30, 0.02);
 }
