@@ -865,12 +865,18 @@ fn error_chain(e: &dyn std::error::Error) -> String {
     s
 }
 
-/// What a gRPC status means for the task.
+/// What a gRPC status means for the task. A paused worker says so in the
+/// status's details (a typed `TaskRefusal`), not in its text.
 fn classify(status: &tonic::Status) -> TaskError {
+    use prost::Message;
     use tonic::Code;
     let msg = status.message().to_string();
+    if let Ok(r) = proto::TaskRefusal::decode(status.details()) {
+        if r.state == WorkerState::Paused as i32 {
+            return TaskError::Paused(r.paused_reason);
+        }
+    }
     match status.code() {
-        Code::Unavailable if msg.starts_with("paused") => TaskError::Paused(msg),
         Code::Unauthenticated => TaskError::Refused(format!("refused the token: {msg}")),
         Code::FailedPrecondition => TaskError::Refused(msg),
         Code::Cancelled => TaskError::Failed(format!("cancelled by the worker: {msg}")),
@@ -1038,5 +1044,21 @@ async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: D
             stalled: events::stalled(&stats.workers),
             workers: stats.workers,
         }));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_paused_worker_is_recognised_by_its_typed_refusal_not_its_text() {
+        match classify(&super::super::worker::paused_status("schedule")) {
+            TaskError::Paused(reason) => assert_eq!(reason, "schedule"),
+            other => panic!("{other:?}"),
+        }
+        // The same words without the typed refusal are a plain failure.
+        assert!(matches!(classify(&tonic::Status::unavailable("paused (schedule)")), TaskError::Failed(_)));
+        assert!(matches!(classify(&tonic::Status::unauthenticated("no")), TaskError::Refused(_)));
     }
 }

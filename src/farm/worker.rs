@@ -213,7 +213,7 @@ impl Worker for Service {
         let s = self.shared.clone();
         check_task(&task, s.protocol_version())?;
         if let Some(reason) = s.paused_reason() {
-            return Err(Status::unavailable(format!("paused ({reason})")));
+            return Err(paused_status(&reason));
         }
         let started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
         if s.config.faults.stall_after_tasks.is_some_and(|n| started >= n) {
@@ -329,7 +329,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
                 };
                 Ok(Arc::new((scene, settings)))
             });
-            let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true)).await? {
+            let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
                 Ok(r) => r?,
                 Err(e) => return Err(Status::internal(format!("preparing the job panicked: {e}"))),
             };
@@ -351,7 +351,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
     };
     let pixels_hb = pixels.clone();
     let columns =
-        watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false)).await?.map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
+        watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false), s).await?.map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };
@@ -375,6 +375,7 @@ async fn watch_blocking<T>(
     paused: &mut watch::Receiver<bool>,
     cancel: &AtomicBool,
     beat: impl Fn() -> proto::RenderEvent,
+    shared: &Shared,
 ) -> Result<Result<T, String>, Status> {
     let mut tick = tokio::time::interval(Duration::from_millis(1000));
     tick.tick().await;
@@ -392,7 +393,7 @@ async fn watch_blocking<T>(
                 if changed.is_ok() && *paused.borrow() {
                     cancel.store(true, Ordering::Relaxed);
                     let _ = work.await;
-                    return Err(Status::unavailable("paused"));
+                    return Err(paused_status(&shared.paused_reason().unwrap_or_else(|| "signal".into())));
                 }
             }
         }
@@ -425,6 +426,14 @@ pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedSe
     };
     let svc = WorkerServer::new(Service { shared }).max_decoding_message_size(MAX_MESSAGE_BYTES).max_encoding_message_size(MAX_MESSAGE_BYTES);
     tonic::service::interceptor::InterceptedService::new(svc, check)
+}
+
+/// The status a paused worker answers a task with: UNAVAILABLE, with a
+/// [`proto::TaskRefusal`] in its details saying so and why.
+pub fn paused_status(reason: &str) -> Status {
+    use prost::Message;
+    let refusal = proto::TaskRefusal { state: WorkerState::Paused as i32, paused_reason: reason.to_string() };
+    Status::with_details(tonic::Code::Unavailable, format!("paused ({reason})"), refusal.encode_to_vec().into())
 }
 
 #[cfg(test)]
