@@ -77,7 +77,7 @@ cloudy: build
 	      --out $(OUT)/cloudy$${c}_sun$${zen}.exr --png docs/images/cloudy$${c}_sun$${zen}.png --json > $(OUT)/cloudy$${c}_sun$${zen}.json || exit 1; \
 	  done; \
 	done
-	python3 scripts/contact_sheet.py docs/images/cloudy.png 6 \
+	python3 scripts/contact_sheet.py --scale 3 docs/images/cloudy.png 6 \
 	  $(foreach z,30 80,$(foreach c,0 1 2 3 4 5,docs/images/cloudy$(c)_sun$(z).png))
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.

@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """Tiles PNG images into one contact sheet, standard library only (for
-`make sunsets`): contact_sheet.py OUT.png COLUMNS IN1.png IN2.png ...
+`make sunsets`): contact_sheet.py [--scale K] OUT.png COLUMNS IN1.png IN2.png ...
 Images are laid out row by row, COLUMNS per row, with a 4-pixel black
-gutter. Reads 8-bit RGB or RGBA, non-interlaced PNGs (what `sky` writes)."""
+gutter; --scale K enlarges the sheet K times, each pixel a K×K block (for
+small renders). Reads 8-bit RGB or RGBA, non-interlaced PNGs (what `sky` writes)."""
 import struct
 import sys
 import zlib
@@ -56,7 +57,11 @@ def write_png(path, w, h, rows):
 
 
 def main():
-    out, cols, ins = sys.argv[1], int(sys.argv[2]), sys.argv[3:]
+    args = sys.argv[1:]
+    scale = 1
+    if args[:1] == ["--scale"]:
+        scale, args = int(args[1]), args[2:]
+    out, cols, ins = args[0], int(args[1]), args[2:]
     imgs = [read_png(p) for p in ins]
     w, h = imgs[0][0], imgs[0][1]
     g = 4
@@ -68,7 +73,14 @@ def main():
         x0, y0 = (k % cols) * (w + g), (k // cols) * (h + g)
         for y in range(h):
             sheet[y0 + y][3 * x0:3 * (x0 + w)] = rows[y]
-    write_png(out, W, H, [bytes(r) for r in sheet])
+    if scale > 1:
+        big = []
+        for r in sheet:
+            line = b"".join(bytes(r[3 * x:3 * x + 3]) * scale for x in range(W))
+            big.extend([line] * scale)
+        write_png(out, W * scale, H * scale, big)
+    else:
+        write_png(out, W, H, [bytes(r) for r in sheet])
 
 
 if __name__ == "__main__":
