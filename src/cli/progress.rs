@@ -135,11 +135,14 @@ fn show_bars(b: &mut Option<Bars>, p: &Progress) {
     }
 }
 
-/// One plain line: done, rate, elapsed, ETA.
+/// One plain line: done, rate, elapsed, ETA. The rate is in pixels (which
+/// count the columns still being rendered), not samples (which count only
+/// finished columns, and so start near 0).
 pub fn progress_line(p: &Progress) -> String {
     let pct = if p.pixels_total > 0 { 100.0 * p.pixels_done as f64 / p.pixels_total as f64 } else { 100.0 };
     let eta = p.eta_s.map_or("unknown".to_string(), fmt_duration);
-    format!("sky render: {pct:.0} % ({}/{} px), {} samples/s, elapsed {}, ETA {eta}", p.pixels_done, p.pixels_total, fmt_rate(p.samples_per_s), fmt_duration(p.elapsed_s))
+    let px_per_s = p.pixels_done as f64 / p.elapsed_s.max(1e-3);
+    format!("sky render: {pct:.0} % ({}/{} px), {} px/s, elapsed {}, ETA {eta}", p.pixels_done, p.pixels_total, fmt_rate(px_per_s), fmt_duration(p.elapsed_s))
 }
 
 fn describe(e: &FarmEvent) -> String {
