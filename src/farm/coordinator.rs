@@ -26,6 +26,7 @@ use super::events::{self, EventSink, FarmEvent, Progress};
 use super::journal::Journal;
 use super::proto::worker_client::WorkerClient;
 use super::proto::{self, render_event::Event, WorkerState};
+use super::protocol::{classify, TaskError};
 use super::{tile, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
 use crate::render::{self, PixelResult, Scene, Settings};
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -213,19 +214,6 @@ enum Assign {
     Task(Assignment),
     Wait,
     Done,
-}
-
-/// How a task ended badly.
-#[derive(Debug)]
-enum TaskError {
-    /// The worker is paused: re-queue, no blame.
-    Paused(String),
-    /// Another runner won, or the render stops.
-    Cancelled,
-    /// A failure that counts against the worker.
-    Failed(String),
-    /// The worker refuses this job (versions, token): quarantine at once.
-    Refused(String),
 }
 
 struct WState {
@@ -865,25 +853,6 @@ fn error_chain(e: &dyn std::error::Error) -> String {
     s
 }
 
-/// What a gRPC status means for the task. A paused worker says so in the
-/// status's details (a typed `TaskRefusal`), not in its text.
-fn classify(status: &tonic::Status) -> TaskError {
-    use prost::Message;
-    use tonic::Code;
-    let msg = status.message().to_string();
-    if let Ok(r) = proto::TaskRefusal::decode(status.details()) {
-        if r.state == WorkerState::Paused as i32 {
-            return TaskError::Paused(r.paused_reason);
-        }
-    }
-    match status.code() {
-        Code::Unauthenticated => TaskError::Refused(format!("refused the token: {msg}")),
-        Code::FailedPrecondition => TaskError::Refused(msg),
-        Code::Cancelled => TaskError::Failed(format!("cancelled by the worker: {msg}")),
-        code => TaskError::Failed(format!("{code:?}: {msg}")),
-    }
-}
-
 impl Backend {
     /// Ok(None) when ready, Ok(Some(reason)) when paused.
     async fn ready(&mut self, opts: &Options) -> Result<Option<String>, TaskError> {
@@ -1044,21 +1013,5 @@ async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: D
             stalled: events::stalled(&stats.workers),
             workers: stats.workers,
         }));
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_paused_worker_is_recognised_by_its_typed_refusal_not_its_text() {
-        match classify(&super::super::worker::paused_status("schedule")) {
-            TaskError::Paused(reason) => assert_eq!(reason, "schedule"),
-            other => panic!("{other:?}"),
-        }
-        // The same words without the typed refusal are a plain failure.
-        assert!(matches!(classify(&tonic::Status::unavailable("paused (schedule)")), TaskError::Failed(_)));
-        assert!(matches!(classify(&tonic::Status::unauthenticated("no")), TaskError::Refused(_)));
     }
 }

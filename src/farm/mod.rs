@@ -17,6 +17,7 @@ pub mod coordinator;
 pub mod events;
 pub mod job;
 pub mod journal;
+pub mod protocol;
 pub mod tile;
 pub mod worker;
 

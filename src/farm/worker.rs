@@ -213,7 +213,7 @@ impl Worker for Service {
         let s = self.shared.clone();
         check_task(&task, s.protocol_version())?;
         if let Some(reason) = s.paused_reason() {
-            return Err(paused_status(&reason));
+            return Err(super::protocol::paused_status(&reason));
         }
         let started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
         if s.config.faults.stall_after_tasks.is_some_and(|n| started >= n) {
@@ -393,7 +393,7 @@ async fn watch_blocking<T>(
                 if changed.is_ok() && *paused.borrow() {
                     cancel.store(true, Ordering::Relaxed);
                     let _ = work.await;
-                    return Err(paused_status(&shared.paused_reason().unwrap_or_else(|| "signal".into())));
+                    return Err(super::protocol::paused_status(&shared.paused_reason().unwrap_or_else(|| "signal".into())));
                 }
             }
         }
@@ -426,14 +426,6 @@ pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedSe
     };
     let svc = WorkerServer::new(Service { shared }).max_decoding_message_size(MAX_MESSAGE_BYTES).max_encoding_message_size(MAX_MESSAGE_BYTES);
     tonic::service::interceptor::InterceptedService::new(svc, check)
-}
-
-/// The status a paused worker answers a task with: UNAVAILABLE, with a
-/// [`proto::TaskRefusal`] in its details saying so and why.
-pub fn paused_status(reason: &str) -> Status {
-    use prost::Message;
-    let refusal = proto::TaskRefusal { state: WorkerState::Paused as i32, paused_reason: reason.to_string() };
-    Status::with_details(tonic::Code::Unavailable, format!("paused ({reason})"), refusal.encode_to_vec().into())
 }
 
 #[cfg(test)]
