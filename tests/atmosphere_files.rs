@@ -3,6 +3,9 @@
 //! gets located errors; and random mutations of the shipped files never
 //! panic the loader and always get errors that name a line.
 
+mod common;
+
+use common::SplitMix64 as Rng;
 use sky::atmosphere::Atmosphere;
 use std::path::{Path, PathBuf};
 
@@ -69,23 +72,6 @@ fn broken_files_get_located_errors() {
         n += 1;
     }
     assert!(n >= 25, "corpus has only {n} files");
-}
-
-/// A small deterministic generator (SplitMix64) for the mutations.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
 }
 
 fn mutate(text: &str, rng: &mut Rng) -> String {

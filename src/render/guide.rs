@@ -96,7 +96,7 @@ impl RayGuide {
     /// ray is lit. Allocation-free: `scratch` keeps the phase values.
     pub(crate) fn sample_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, scratch: &mut SecondaryScratch, rng: &mut Rng) -> Option<(f64, f64)> {
         let first = tracers.first()?;
-        let end_km = first.ray_end(origin, dir)?;
+        let end_km = first.medium.ray_end(origin, dir)?;
         if !(end_km > 0.0) {
             return None;
         }

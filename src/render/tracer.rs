@@ -198,19 +198,6 @@ impl<'a> Tracer<'a> {
         self
     }
 
-    /// Transmittance from `p` to space along `d`: from the column table when
-    /// there is one (exact optical depth, see [`ColumnPath`]), else by
-    /// ratio tracking.
-    pub fn transmittance_to_space(&self, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
-        if let Some(c) = self.columns {
-            return match self.column_path(c, p, d, None) {
-                None => 0.0,
-                Some(path) => libm::exp(-c.path_optical_depth(&path, &self.spectral.extinction)),
-            };
-        }
-        self.transmittance(p, d, rng)
-    }
-
     /// The columns whose sum and difference give the optical depth from `p`
     /// along `d` over `t_km` (to space when None); None when a ray to space
     /// meets the ground. The segment must not cross the ground.
@@ -284,12 +271,6 @@ impl<'a> Tracer<'a> {
     #[inline]
     pub(crate) fn up(&self, p: DVec3) -> DVec3 {
         self.medium.up(p)
-    }
-
-    /// The distance from `p` along `d` to the ground, or else to the top of
-    /// the atmosphere (None when the ray never meets either).
-    pub(crate) fn ray_end(&self, p: DVec3, d: DVec3) -> Option<f64> {
-        self.medium.ray_end(p, d)
     }
 
     /// Transmittance from `p` to space along `d` by ratio tracking (0 if
