@@ -7,12 +7,14 @@
 //! - [`mie`]: Mie theory (BHMIE), log-normal size distributions, phase tables;
 //! - [`render`]: the spectral path tracer behind `sky render`;
 //! - [`farm`]: the render farm (`sky worker` and the distributed `sky render`);
-//! - [`lut`]: the talk's adaptive LUT mappings;
+//! - [`bake`]: `sky bake-luts`, the basis-sky LUTs rendered, cached and packed;
+//! - [`lut`]: the talk's adaptive LUT mappings, the weather rule and the reference decoder;
 //! - [`spectrum`]: colour matching functions and the solar spectrum;
 //! - [`table`]: the tabulated data files of `atmospheres/data/`;
 //! - [`plot`]: PNG plots for people.
 
 pub mod atmosphere;
+pub mod bake;
 pub mod farm;
 pub mod lut;
 pub mod mie;

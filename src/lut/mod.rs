@@ -2,3 +2,4 @@
 //! (time slices and sky directions).
 
 pub mod mapping;
+pub mod weather;

@@ -1,0 +1,336 @@
+//! Bake files: which basis skies a bake renders, from which atmosphere
+//! files, at what size and quality. Parsed like the atmosphere files: every
+//! error names the file and the line of the offending key, and unknown keys
+//! are errors.
+//!
+//! ```toml
+//! [quality.draft]            # --quality draft
+//! band_nm = 20.0
+//! spp = 8
+//! [quality.final]            # --quality final
+//! band_nm = 5.0
+//! spp = 16384                # the most a texel may take
+//! max_rel_error = 0.01       # adaptive: stop at this standard error of Y
+//!
+//! [[sky]]                    # in the talk's order: clear, hazed, cloudy0 ... cloudy5
+//! name = "clear"
+//! atmosphere = "clear.toml"  # relative to the bake file
+//! width = 32                 # texels along u (heading around the sun)
+//! height = 128               # texels along v (angle from the sun)
+//! slices = 64                # the talk's time mapping: 48 above the horizon, 16 below
+//! altitude_m = 0.0           # the observer
+//! ```
+
+use crate::atmosphere::Located;
+use crate::lut::mapping;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use toml::Spanned as S;
+
+/// How carefully a bake renders: the two presets of a bake file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Quality {
+    /// Minutes on a laptop: for demos, CI and checking a pipeline.
+    Draft,
+    /// The shipping quality.
+    Final,
+}
+
+impl Quality {
+    pub fn name(self) -> &'static str {
+        match self {
+            Quality::Draft => "draft",
+            Quality::Final => "final",
+        }
+    }
+}
+
+/// The sampling of one quality preset.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Sampling {
+    /// Width of the spectral bands, nm (hero-wavelength sampling).
+    pub band_nm: f64,
+    /// Samples per texel; with `max_rel_error`, the most a texel may take.
+    pub spp: u32,
+    /// Adaptive sampling's target standard error of Y, relative.
+    pub max_rel_error: Option<f64>,
+}
+
+/// One basis sky of a bake.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasisSky {
+    pub name: String,
+    pub atmosphere: PathBuf,
+    /// Texels along u (heading around the sun).
+    pub width: usize,
+    /// Texels along v (angle from the sun).
+    pub height: usize,
+    pub slices: usize,
+    pub altitude_m: f64,
+    /// The line of its `[[sky]]` table, for messages.
+    pub line: usize,
+    pub draft: Sampling,
+    pub final_: Sampling,
+}
+
+impl BasisSky {
+    pub fn sampling(&self, q: Quality) -> &Sampling {
+        match q {
+            Quality::Draft => &self.draft,
+            Quality::Final => &self.final_,
+        }
+    }
+}
+
+/// A parsed bake file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BakeFile {
+    pub path: PathBuf,
+    pub skies: Vec<BasisSky>,
+}
+
+/// Every error found in a bake file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}", errors.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n"))]
+pub struct BakeFileError {
+    pub errors: Vec<Located>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    #[serde(default)]
+    quality: BTreeMap<String, S<RawSampling>>,
+    #[serde(default)]
+    sky: Vec<S<RawSky>>,
+}
+
+#[derive(Deserialize, Clone, Default)]
+#[serde(deny_unknown_fields)]
+struct RawSampling {
+    band_nm: Option<S<f64>>,
+    spp: Option<S<i64>>,
+    max_rel_error: Option<S<f64>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSky {
+    name: S<String>,
+    atmosphere: S<String>,
+    width: S<i64>,
+    height: S<i64>,
+    slices: Option<S<i64>>,
+    altitude_m: Option<S<f64>>,
+    #[serde(default)]
+    quality: BTreeMap<String, S<RawSampling>>,
+}
+
+/// The presets when a bake file names none: a draft that bakes all eight
+/// basis skies in minutes on two cores, and a final at the R11G11B10F
+/// rounding error (about 1 %).
+pub fn default_sampling(q: Quality) -> Sampling {
+    match q {
+        Quality::Draft => Sampling { band_nm: 20.0, spp: 8, max_rel_error: None },
+        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01) },
+    }
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+    errors: Vec<Located>,
+}
+
+impl Ctx<'_> {
+    fn line(&self, offset: usize) -> usize {
+        self.text[..offset.min(self.text.len())].bytes().filter(|&b| b == b'\n').count() + 1
+    }
+
+    fn err<T>(&mut self, at: &S<T>, message: impl Into<String>) {
+        let line = self.line(at.span().start);
+        self.errors.push(Located { path: self.path.to_path_buf(), line: Some(line), message: message.into() });
+    }
+
+    /// A preset: `base`, with what `raw` sets replaced and checked.
+    fn sampling(&mut self, base: &Sampling, raw: &RawSampling, what: &str) -> Sampling {
+        let mut s = base.clone();
+        if let Some(b) = &raw.band_nm {
+            if b.get_ref().is_finite() && *b.get_ref() >= 1.0 && *b.get_ref() <= 100.0 {
+                s.band_nm = *b.get_ref();
+            } else {
+                self.err(b, format!("{what}.band_nm: must be between 1 and 100 nm, got {}", b.get_ref()));
+            }
+        }
+        if let Some(n) = &raw.spp {
+            match u32::try_from(*n.get_ref()) {
+                Ok(v) if v >= 1 => s.spp = v,
+                _ => self.err(n, format!("{what}.spp: must be a whole number from 1 to {}, got {}", u32::MAX, n.get_ref())),
+            }
+        }
+        if let Some(e) = &raw.max_rel_error {
+            let e_v = *e.get_ref();
+            if e_v > 0.0 && e_v < 1.0 {
+                s.max_rel_error = Some(e_v);
+            } else {
+                self.err(e, format!("{what}.max_rel_error: must be between 0 and 1 (a fraction, e.g. 0.01), got {e_v}"));
+            }
+        }
+        s
+    }
+
+    fn presets(&mut self, base: [&Sampling; 2], raw: &BTreeMap<String, S<RawSampling>>, prefix: &str) -> [Sampling; 2] {
+        let mut out = [base[0].clone(), base[1].clone()];
+        for (name, r) in raw {
+            let i = match name.as_str() {
+                "draft" => 0,
+                "final" => 1,
+                other => {
+                    self.err(r, format!("{prefix}quality.{other}: unknown preset (the presets are draft and final)"));
+                    continue;
+                }
+            };
+            out[i] = self.sampling(base[i], r.get_ref(), &format!("{prefix}quality.{name}"));
+        }
+        out
+    }
+}
+
+fn positive_size(ctx: &mut Ctx, v: &S<i64>, key: &str, sky: &str) -> usize {
+    match usize::try_from(*v.get_ref()) {
+        Ok(n) if (1..=4096).contains(&n) => n,
+        _ => {
+            ctx.err(v, format!("sky {sky:?}: {key} must be from 1 to 4096 texels, got {}", v.get_ref()));
+            1
+        }
+    }
+}
+
+impl BakeFile {
+    pub fn load(path: &Path) -> Result<BakeFile, BakeFileError> {
+        let text = std::fs::read(path).map_err(|e| BakeFileError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read the bake file: {e}") }] })?;
+        let text = String::from_utf8(text).map_err(|e| {
+            let line = e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
+            BakeFileError { errors: vec![Located { path: path.to_path_buf(), line: Some(line), message: "not UTF-8 text".into() }] }
+        })?;
+        BakeFile::parse(path, &text)
+    }
+
+    /// Parses bake-file text; `path` names it in errors and anchors the
+    /// atmosphere paths.
+    pub fn parse(path: &Path, text: &str) -> Result<BakeFile, BakeFileError> {
+        let raw: RawFile = toml::from_str(text).map_err(|e| {
+            let line = e.span().map(|s| text[..s.start.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1);
+            BakeFileError { errors: vec![Located { path: path.to_path_buf(), line, message: e.message().trim().to_string() }] }
+        })?;
+        let mut ctx = Ctx { path, text, errors: Vec::new() };
+        let defaults = [default_sampling(Quality::Draft), default_sampling(Quality::Final)];
+        let global = ctx.presets([&defaults[0], &defaults[1]], &raw.quality, "");
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+        let mut skies: Vec<BasisSky> = Vec::new();
+        if raw.sky.is_empty() {
+            ctx.errors.push(Located { path: path.to_path_buf(), line: None, message: "no [[sky]] tables: a bake needs at least one basis sky".into() });
+        }
+        for s in &raw.sky {
+            let r = s.get_ref();
+            let name = r.name.get_ref().clone();
+            if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+                ctx.err(&r.name, format!("sky name {name:?}: use letters, digits, '-' and '_' (it names files)"));
+            }
+            if skies.iter().any(|k| k.name == name) {
+                ctx.err(&r.name, format!("sky {name:?} appears twice"));
+            }
+            let atmosphere = dir.join(r.atmosphere.get_ref());
+            if !atmosphere.is_file() {
+                ctx.err(&r.atmosphere, format!("sky {name:?}: atmosphere file {} not found", atmosphere.display()));
+            }
+            let width = positive_size(&mut ctx, &r.width, "width", &name);
+            let height = positive_size(&mut ctx, &r.height, "height", &name);
+            let slices = match &r.slices {
+                None => mapping::SLICES,
+                Some(n) if *n.get_ref() == mapping::SLICES as i64 => mapping::SLICES,
+                Some(n) => {
+                    ctx.err(
+                        n,
+                        format!(
+                            "sky {name:?}: slices must be {} (the talk's time mapping: {} above the horizon, {} below), got {}",
+                            mapping::SLICES,
+                            mapping::UPPER_SLICES,
+                            mapping::LOWER_SLICES,
+                            n.get_ref()
+                        ),
+                    );
+                    mapping::SLICES
+                }
+            };
+            let altitude_m = match &r.altitude_m {
+                None => 0.0,
+                Some(a) if a.get_ref().is_finite() && *a.get_ref() >= 0.0 && *a.get_ref() <= 20_000.0 => *a.get_ref(),
+                Some(a) => {
+                    ctx.err(a, format!("sky {name:?}: altitude_m must be from 0 to 20000 m, got {}", a.get_ref()));
+                    0.0
+                }
+            };
+            let [draft, final_] = ctx.presets([&global[0], &global[1]], &r.quality, &format!("sky {name:?}: "));
+            let line = ctx.line(s.span().start);
+            skies.push(BasisSky { name, atmosphere, width, height, slices, altitude_m, line, draft, final_ });
+        }
+        if ctx.errors.is_empty() {
+            Ok(BakeFile { path: path.to_path_buf(), skies })
+        } else {
+            Err(BakeFileError { errors: ctx.errors })
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<BakeFile, BakeFileError> {
+        // Anchored in atmospheres/ so that the shipped files exist.
+        BakeFile::parse(&Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/test-bake.toml"), text)
+    }
+
+    #[test]
+    fn a_bake_file_parses_with_its_presets() {
+        let b = parse("[quality.draft]\nspp = 4\n[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[sky.quality.final]\nmax_rel_error = 0.02\n").unwrap();
+        assert_eq!(b.skies.len(), 1);
+        let s = &b.skies[0];
+        assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
+        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None });
+        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02) });
+    }
+
+    #[test]
+    fn errors_name_the_line_and_the_key() {
+        let text = "[[sky]]\nname = \"clear\"\natmosphere = \"nope.toml\"\nwidth = 0\nheight = 128\nslices = 32\n[sky.quality.final]\nmax_rel_error = 2.0\n[sky.quality.best]\nspp = 1\n";
+        let e = parse(text).unwrap_err();
+        let lines: Vec<String> = e.errors.iter().map(|l| l.to_string()).collect();
+        let has = |line: usize, what: &str| lines.iter().any(|l| l.contains(&format!("test-bake.toml:{line}: ")) && l.contains(what));
+        assert!(has(3, "nope.toml not found"), "{lines:?}");
+        assert!(has(4, "width must be"), "{lines:?}");
+        assert!(has(6, "slices must be 64"), "{lines:?}");
+        assert!(has(8, "max_rel_error"), "{lines:?}");
+        assert!(has(9, "quality.best: unknown preset"), "{lines:?}");
+        assert_eq!(lines.len(), 5, "{lines:?}");
+        let unknown = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\ncolour = 3\n").unwrap_err();
+        assert!(unknown.to_string().contains("test-bake.toml:6: unknown field `colour`"), "{unknown}");
+        let twice = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n").unwrap_err();
+        assert!(twice.to_string().contains("test-bake.toml:7: sky \"a\" appears twice"), "{twice}");
+    }
+
+    #[test]
+    fn the_shipped_bake_is_the_talks() {
+        let b = BakeFile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("bakes/basis-skies.toml")).unwrap();
+        let names: Vec<&str> = b.skies.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(names, ["clear", "hazed", "cloudy0", "cloudy1", "cloudy2", "cloudy3", "cloudy4", "cloudy5"]);
+        // The talk's "Memory Budget of Look-up Table": sunny 32 x 128, cloudy 16 x 64, 64 slices.
+        for s in &b.skies {
+            let size = if s.name.starts_with("cloudy") { (16, 64) } else { (32, 128) };
+            assert_eq!((s.width, s.height, s.slices), (size.0, size.1, 64), "{}", s.name);
+        }
+    }
+}

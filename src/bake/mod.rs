@@ -1,0 +1,93 @@
+//! `sky bake-luts`: the talk's basis-sky LUTs. A bake file ([`file`]) names
+//! the basis skies; [`run`] renders each one's 64 time slices through the
+//! LUT camera (sun disk hidden) into a content-addressed [`cache`], on the
+//! embedded worker or the farm, reporting [`BakeEvent`]s; the packing into
+//! texture arrays and the manifest follow.
+
+pub mod cache;
+pub mod file;
+pub mod run;
+
+pub use cache::{RenderedSlice, SliceCache};
+pub use file::{BakeFile, BakeFileError, BasisSky, Quality, Sampling};
+pub use run::{render_slices, BakeOptions, SkySlices, SliceId};
+
+use crate::farm::events::FarmEvent;
+use std::sync::Arc;
+
+/// What a bake reports while it runs. The library only emits these; the
+/// CLI shows them as a bar, plain lines or JSON lines.
+#[derive(Debug, Clone, serde::Serialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum BakeEvent {
+    /// The bake's work, once the cache has been consulted.
+    Planned { skies: usize, slices_total: usize, slices_cached: usize, texels_to_render: u64 },
+    /// A basis sky's optics are being prepared.
+    Preparing { sky: String },
+    /// One slice is done (rendered now, or found in the cache).
+    Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
+    /// Every slice of a basis sky is done.
+    SkyDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64 },
+    /// Periodic progress over the whole bake.
+    Progress(BakeProgress),
+    /// A farm event of the slice being rendered (worker quarantined, task
+    /// failed); its progress events become [`BakeEvent::Progress`].
+    Farm { sky: String, index: usize, farm: FarmEvent },
+}
+
+/// Progress over the whole bake, in texels still to render (cached slices
+/// are not counted).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BakeProgress {
+    pub elapsed_s: f64,
+    pub texels_done: u64,
+    pub texels_total: u64,
+    pub slices_done: usize,
+    pub slices_total: usize,
+    /// The remaining texels at the rate so far; None before one is known.
+    pub eta_s: Option<f64>,
+    /// The basis sky and slice being rendered.
+    pub sky: String,
+    pub index: usize,
+    /// Why nothing is rendering, when no farm worker can.
+    pub stalled: Option<String>,
+}
+
+/// Where a bake sends its events.
+#[derive(Clone)]
+pub struct BakeSink(pub Arc<dyn Fn(&BakeEvent) + Send + Sync>);
+
+impl BakeSink {
+    pub fn new(f: impl Fn(&BakeEvent) + Send + Sync + 'static) -> BakeSink {
+        BakeSink(Arc::new(f))
+    }
+
+    pub fn emit(&self, e: &BakeEvent) {
+        (self.0)(e)
+    }
+}
+
+impl std::fmt::Debug for BakeSink {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("BakeSink")
+    }
+}
+
+/// Why a bake failed.
+#[derive(Debug, thiserror::Error)]
+pub enum BakeError {
+    #[error("{0}")]
+    File(#[from] BakeFileError),
+    #[error("basis sky {sky}: {error}")]
+    Atmosphere { sky: String, error: crate::atmosphere::LoadError },
+    #[error("{0}")]
+    Cache(#[from] cache::CacheError),
+    #[error("basis sky {sky}, slice {index}: {source}")]
+    Render { sky: String, index: usize, source: crate::farm::coordinator::FarmError },
+    #[error("--slice {0}: no such basis sky or slice (NAME:INDEX, INDEX from 0 to 63)")]
+    NoSuchSlice(String),
+    #[error("basis sky {sky}, slice {index}, texel (u {u}, v {v}): {what} is not finite")]
+    NotFinite { sky: String, index: usize, u: usize, v: usize, what: &'static str },
+    #[error("bake cancelled")]
+    Cancelled,
+}

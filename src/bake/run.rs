@@ -1,0 +1,296 @@
+//! Rendering a bake's slices: for every basis sky, its 64 sun elevations
+//! (`lut::mapping::slice_sun_zenith_deg`) through the LUT camera with the
+//! sun disk hidden, each slice taken from the cache when it is there and
+//! rendered through a [`Session`] (optics prepared once per basis sky) when
+//! it is not.
+
+use super::cache::{slice_key, RenderedSlice, SliceCache};
+use super::file::{BakeFile, BasisSky, Quality, Sampling};
+use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
+use crate::atmosphere::Atmosphere;
+use crate::farm::coordinator::{Options, WorkerSpec};
+use crate::farm::events::{EventSink, FarmEvent};
+use crate::lut::mapping::{self, DirectionMapping};
+use crate::mie::MieCache;
+use crate::render::camera::Camera;
+use crate::render::tracer::Estimator;
+use crate::render::{SpectralSettings, View, WavelengthSampling};
+use crate::session::{OpticsCache, Session};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+/// The seed of every slice. One seed for all slices of a basis sky makes
+/// their noise correlated (common random numbers), so the sky does not
+/// flicker as a runtime interpolates from one slice to the next.
+pub const BAKE_SEED: u64 = 0x5eed_5107;
+
+/// One slice of a bake: `NAME:INDEX` (`--slice clear:12`).
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
+pub struct SliceId {
+    pub sky: String,
+    pub index: usize,
+}
+
+impl std::str::FromStr for SliceId {
+    type Err = String;
+    fn from_str(s: &str) -> Result<SliceId, String> {
+        let (sky, index) = s.rsplit_once(':').ok_or_else(|| format!("{s:?}: expected NAME:INDEX, e.g. clear:12"))?;
+        let index: usize = index.parse().map_err(|_| format!("{s:?}: the slice index must be a whole number from 0 to {}", mapping::SLICES - 1))?;
+        if index >= mapping::SLICES || sky.is_empty() {
+            return Err(format!("{s:?}: expected NAME:INDEX with INDEX from 0 to {}", mapping::SLICES - 1));
+        }
+        Ok(SliceId { sky: sky.to_string(), index })
+    }
+}
+
+impl std::fmt::Display for SliceId {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.sky, self.index)
+    }
+}
+
+/// How to run a bake.
+#[derive(Debug, Clone)]
+pub struct BakeOptions {
+    pub quality: Quality,
+    pub cache: SliceCache,
+    /// The workers (the embedded one: `WorkerSpec::Local`).
+    pub workers: Vec<WorkerSpec>,
+    pub farm: Options,
+    /// The cores the workers have in all, for the cost in core-seconds.
+    pub cores: usize,
+    /// Only these slices (none: every slice of every basis sky).
+    pub only: Option<Vec<SliceId>>,
+    pub events: Option<BakeSink>,
+}
+
+/// The rendered slices of one basis sky, with what packing needs to know.
+#[derive(Debug, Clone)]
+pub struct SkySlices {
+    pub sky: BasisSky,
+    pub atmosphere_name: String,
+    pub atmosphere_hash: String,
+    pub radius_km: f64,
+    pub top_km: f64,
+    /// The sun zenith angle beyond which a slice is latitude-longitude.
+    pub threshold_deg: f64,
+    pub spectral: SpectralSettings,
+    pub sampling: Sampling,
+    /// By slice index; None where `only` left a slice out.
+    pub slices: Vec<Option<RenderedSlice>>,
+    pub rendered: usize,
+    pub cached: usize,
+}
+
+/// The spectral settings of a preset: hero-wavelength sampling, XYZ only.
+pub fn spectral_settings(s: &Sampling) -> SpectralSettings {
+    SpectralSettings { band_nm: s.band_nm, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: Vec::new(), xyz: true }
+}
+
+/// The view of slice `index` of `sky`.
+pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, top_km: f64, threshold_deg: f64) -> View {
+    let sun_zenith_deg = mapping::slice_sun_zenith_deg(index, radius_km, top_km);
+    View {
+        camera: Camera::Lut { mapping: DirectionMapping::new(sun_zenith_deg, threshold_deg), sun_azimuth_deg: 0.0 },
+        width: sky.width,
+        height: sky.height,
+        sun_zenith_deg,
+        sun_azimuth_deg: 0.0,
+        altitude_m: sky.altitude_m,
+        spp: s.spp,
+        seed: BAKE_SEED,
+        estimator: Estimator::Full,
+        // The disk belongs in the sunlight LUT, not in a texture that tops out at 65024.
+        sun_disk: false,
+        max_rel_error: s.max_rel_error,
+    }
+}
+
+/// Bake-wide progress, updated from the farm's progress of each slice.
+struct Tracker {
+    start: Instant,
+    texels_total: u64,
+    texels_before: u64,
+    slices_total: usize,
+    slices_done: usize,
+    /// The slice being rendered.
+    current: (String, usize),
+    sink: Option<BakeSink>,
+}
+
+impl Tracker {
+    fn emit(&self, e: BakeEvent) {
+        if let Some(s) = &self.sink {
+            s.emit(&e);
+        }
+    }
+
+    fn progress(&self, sky: &str, index: usize, in_slice: u64, stalled: Option<String>) -> BakeProgress {
+        let elapsed_s = self.start.elapsed().as_secs_f64();
+        let texels_done = (self.texels_before + in_slice).min(self.texels_total);
+        let eta_s = (texels_done > 0).then(|| elapsed_s * (self.texels_total - texels_done) as f64 / texels_done as f64);
+        BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky: sky.to_string(), index, stalled }
+    }
+}
+
+/// Renders (or finds in the cache) every slice the options ask for, basis
+/// sky after basis sky.
+pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel: Arc<AtomicBool>) -> Result<Vec<SkySlices>, BakeError> {
+    if let Some(only) = &opts.only {
+        for id in only {
+            if !bake.skies.iter().any(|s| s.name == id.sky && id.index < s.slices) {
+                return Err(BakeError::NoSuchSlice(id.to_string()));
+            }
+        }
+    }
+    // First the plan: every slice's key, and which the cache holds.
+    struct Planned {
+        atm: Atmosphere,
+        bundle: crate::atmosphere::Bundle,
+        out: SkySlices,
+        views: Vec<Option<(View, String)>>,
+    }
+    let mut plan: Vec<Planned> = Vec::new();
+    for sky in &bake.skies {
+        let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
+        let sampling = sky.sampling(opts.quality).clone();
+        let spectral = spectral_settings(&sampling);
+        let (radius_km, top_km) = (atm.planet.radius_km, atm.planet.top_km);
+        let threshold_deg = mapping::default_threshold_deg(sky.width, sky.height);
+        let mut views = Vec::new();
+        let mut slices = Vec::new();
+        let mut cached = 0;
+        for index in 0..sky.slices {
+            let wanted = opts.only.as_ref().is_none_or(|o| o.iter().any(|id| id.sky == sky.name && id.index == index));
+            if !wanted {
+                views.push(None);
+                slices.push(None);
+                continue;
+            }
+            let view = slice_view(sky, &sampling, index, radius_km, top_km, threshold_deg);
+            let key = slice_key(&atm.content_hash, &spectral, &view, opts.quality.name());
+            let hit = opts.cache.get(&key);
+            cached += hit.is_some() as usize;
+            views.push(if hit.is_some() { None } else { Some((view, key)) });
+            slices.push(hit);
+        }
+        let out = SkySlices {
+            sky: sky.clone(),
+            atmosphere_name: bundle.name.clone(),
+            atmosphere_hash: atm.content_hash.clone(),
+            radius_km,
+            top_km,
+            threshold_deg,
+            spectral,
+            sampling,
+            slices,
+            rendered: 0,
+            cached,
+        };
+        plan.push(Planned { atm, bundle, out, views });
+    }
+    let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum();
+    let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum();
+    let texels_to_render: u64 = plan.iter().map(|p| p.views.iter().flatten().count() as u64 * (p.out.sky.width * p.out.sky.height) as u64).sum();
+    let tracker = Arc::new(Mutex::new(Tracker {
+        start: Instant::now(),
+        texels_total: texels_to_render,
+        texels_before: 0,
+        slices_total,
+        slices_done: slices_cached,
+        current: (String::new(), 0),
+        sink: opts.events.clone(),
+    }));
+    tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, texels_to_render });
+
+    let optics = OpticsCache::default();
+    let mut done = Vec::new();
+    for Planned { atm, bundle, mut out, views } in plan {
+        let name = out.sky.name.clone();
+        for (index, s) in out.slices.iter().enumerate() {
+            if let Some(s) = s {
+                tracker.lock().unwrap().emit(BakeEvent::Slice {
+                    sky: name.clone(),
+                    index,
+                    sun_zenith_deg: s.sun_zenith_deg,
+                    cached: true,
+                    core_seconds: s.core_seconds,
+                    mean_samples: s.mean_samples(),
+                });
+            }
+        }
+        let mut sky_core_seconds = 0.0;
+        if views.iter().any(Option::is_some) {
+            tracker.lock().unwrap().emit(BakeEvent::Preparing { sky: name.clone() });
+            let session = Session::new(atm, bundle, out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {});
+            for (index, v) in views.into_iter().enumerate() {
+                let Some((view, key)) = v else { continue };
+                if cancel.load(Ordering::SeqCst) {
+                    return Err(BakeError::Cancelled);
+                }
+                tracker.lock().unwrap().current = (name.clone(), index);
+                let slice = render_one(&session, &view, &name, index, opts.cores, cancel.clone())?;
+                opts.cache.put(&key, &slice)?;
+                sky_core_seconds += slice.core_seconds;
+                let mut t = tracker.lock().unwrap();
+                t.texels_before += (view.width * view.height) as u64;
+                t.slices_done += 1;
+                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
+                let p = t.progress(&name, index, 0, None);
+                t.emit(BakeEvent::Progress(p));
+                drop(t);
+                out.slices[index] = Some(slice);
+                out.rendered += 1;
+            }
+        }
+        tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });
+        done.push(out);
+    }
+    Ok(done)
+}
+
+/// The farm options of a bake: the caller's, with the farm's events turned
+/// into the bake's (progress over the whole bake; the rest tagged with the
+/// slice).
+fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
+    let mut farm = opts.farm.clone();
+    let t = tracker.clone();
+    farm.events = Some(EventSink::new(move |e| {
+        let t = t.lock().unwrap();
+        let (sky, index) = t.current.clone();
+        match e {
+            FarmEvent::Progress(p) => {
+                let p = t.progress(&sky, index, p.pixels_done, p.stalled.clone());
+                t.emit(BakeEvent::Progress(p));
+            }
+            other => t.emit(BakeEvent::Farm { sky, index, farm: other.clone() }),
+        }
+    }));
+    farm
+}
+
+/// Renders one slice through the session; a texel that is not finite is an
+/// error naming it.
+fn render_one(session: &Session, view: &View, sky: &str, index: usize, cores: usize, cancel: Arc<AtomicBool>) -> Result<RenderedSlice, BakeError> {
+    let start = Instant::now();
+    let rendered = session.render_view(view, cancel).map_err(|source| BakeError::Render { sky: sky.to_string(), index, source })?;
+    let core_seconds = start.elapsed().as_secs_f64() * cores as f64;
+    let px = &rendered.image.pixels;
+    for (i, p) in px.iter().enumerate() {
+        for (what, v) in [("X", p.xyz[0]), ("Y", p.xyz[1]), ("Z", p.xyz[2])] {
+            if !v.is_finite() {
+                return Err(BakeError::NotFinite { sky: sky.to_string(), index, u: i % view.width, v: i / view.width, what });
+            }
+        }
+    }
+    Ok(RenderedSlice {
+        width: view.width,
+        height: view.height,
+        sun_zenith_deg: view.sun_zenith_deg,
+        xyz: px.iter().map(|p| p.xyz).collect(),
+        xyz_stderr: px.iter().map(|p| p.xyz_stderr).collect(),
+        samples: px.iter().map(|p| p.samples).collect(),
+        core_seconds,
+    })
+}
