@@ -116,6 +116,8 @@ struct Tracker {
     slices_done: usize,
     /// The slice being rendered.
     current: (String, usize),
+    /// Seconds spent preparing optics (not rendering), left out of the rate.
+    prep_s: f64,
     sink: Option<BakeSink>,
 }
 
@@ -129,7 +131,10 @@ impl Tracker {
     fn progress(&self, sky: &str, index: usize, in_slice: u64, stalled: Option<String>) -> BakeProgress {
         let elapsed_s = self.start.elapsed().as_secs_f64();
         let texels_done = (self.texels_before + in_slice).min(self.texels_total);
-        let eta_s = (texels_done > 0).then(|| elapsed_s * (self.texels_total - texels_done) as f64 / texels_done as f64);
+        // The rate of rendering so far (optics preparation left out), once
+        // a hundredth of the work gives it meaning.
+        let render_s = (elapsed_s - self.prep_s).max(1e-3);
+        let eta_s = (texels_done * 100 >= self.texels_total && texels_done > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / texels_done as f64);
         BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky: sky.to_string(), index, stalled }
     }
 }
@@ -200,6 +205,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         slices_total,
         slices_done: slices_cached,
         current: (String::new(), 0),
+        prep_s: 0.0,
         sink: opts.events.clone(),
     }));
     tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, texels_to_render });
@@ -223,7 +229,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let mut sky_core_seconds = 0.0;
         if views.iter().any(Option::is_some) {
             tracker.lock().unwrap().emit(BakeEvent::Preparing { sky: name.clone() });
+            let prep = Instant::now();
             let session = Session::new(atm, bundle, out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {});
+            tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
             for (index, v) in views.into_iter().enumerate() {
                 let Some((view, key)) = v else { continue };
                 if cancel.load(Ordering::SeqCst) {
@@ -244,7 +252,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 out.rendered += 1;
             }
         }
-        tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });
+        if out.slices.iter().any(Option::is_some) {
+            tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });
+        }
         done.push(out);
     }
     Ok(done)

@@ -14,7 +14,9 @@ macro_rules! outln {
 }
 
 mod atmosphere;
+mod bake;
 mod bench;
+mod farm_args;
 mod mie;
 mod progress;
 mod render;
@@ -49,8 +51,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Run a render-farm worker daemon on an idle PC
     Worker(worker::WorkerArgs),
-    /// Bake the basis-sky, fog, transmittance and ambient LUTs (not implemented yet)
-    BakeLuts(NotYet),
+    /// Bake the talk's basis-sky LUTs (R11G11B10F texture arrays and a manifest)
+    BakeLuts(bake::BakeArgs),
     /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
     Preview(NotYet),
     /// Validate and inspect atmosphere files (TOML; a file without a [sun]
@@ -104,7 +106,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(a) => render::run(a),
         Command::Worker(a) => worker::run(a),
-        Command::BakeLuts(_) => not_yet("bake-luts", None),
+        Command::BakeLuts(a) => bake::run(a),
         Command::Preview(_) => not_yet("preview", None),
         Command::Atmosphere(c) => atmosphere::run(c),
         Command::Mie(a) => mie::run(a),

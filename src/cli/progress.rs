@@ -153,7 +153,7 @@ fn describe(e: &FarmEvent) -> String {
     }
 }
 
-fn fmt_rate(r: f64) -> String {
+pub fn fmt_rate(r: f64) -> String {
     if r >= 1e6 {
         format!("{:.1}M", r / 1e6)
     } else if r >= 1e3 {
@@ -163,7 +163,7 @@ fn fmt_rate(r: f64) -> String {
     }
 }
 
-fn fmt_duration(s: f64) -> String {
+pub fn fmt_duration(s: f64) -> String {
     let s = s.round() as u64;
     if s >= 3600 {
         format!("{}h{:02}m", s / 3600, s % 3600 / 60)

@@ -7,7 +7,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use sky::atmosphere::Atmosphere;
 use sky::farm::coordinator::{FarmError, Options, WorkerSpec};
-use sky::farm::{config, journal};
+use sky::farm::journal;
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
@@ -127,18 +127,8 @@ pub struct RenderArgs {
     /// The naive estimator (analog tracking, no next-event estimation), for comparisons
     #[arg(long, hide = true)]
     naive: bool,
-    /// Render on the `sky worker` daemons of this farm file (see farm/farm.toml)
-    #[arg(long, value_name = "FILE", conflicts_with = "workers", help_heading = "Farm")]
-    farm: Option<PathBuf>,
-    /// Render on these workers, comma-separated HOST:PORT (or http[s]://HOST:PORT)
-    #[arg(long, value_delimiter = ',', value_name = "HOST:PORT", help_heading = "Farm")]
-    workers: Vec<String>,
-    /// The farm's shared token (default: the farm file's token_file, else $SKY_FARM_TOKEN)
-    #[arg(long, value_name = "FILE", help_heading = "Farm")]
-    token_file: Option<PathBuf>,
-    /// CA certificate (PEM) of the workers' TLS certificates (implies https)
-    #[arg(long, value_name = "FILE", help_heading = "Farm")]
-    tls_ca: Option<PathBuf>,
+    #[command(flatten)]
+    farm: super::farm_args::FarmArgs,
     /// Render this fraction of the columns a second time on another worker and compare bit for bit
     #[arg(long, value_name = "F", help_heading = "Farm")]
     verify_fraction: Option<f64>,
@@ -154,60 +144,6 @@ pub struct RenderArgs {
     /// Fault injection for the farm's tests: SIGKILL this coordinator once N columns are journaled
     #[arg(long, hide = true)]
     fault_kill_after_columns: Option<u32>,
-}
-
-/// The workers and policy from --farm / --workers, or None for the
-/// embedded worker.
-fn farm_plan(a: &RenderArgs) -> Result<Option<(Vec<WorkerSpec>, Options)>> {
-    let mut opts = Options::default();
-    let (entries, file) = if let Some(f) = &a.farm {
-        let file = config::FarmFile::load(f)?;
-        (file.workers.iter().map(|w| (w.name.clone(), w.address.clone())).collect::<Vec<_>>(), Some(file))
-    } else if !a.workers.is_empty() {
-        (a.workers.iter().map(|w| (None, w.clone())).collect(), None)
-    } else {
-        return Ok(None);
-    };
-    if let Some(f) = &file {
-        if let Some(l) = f.lease_s {
-            opts.lease = std::time::Duration::from_secs_f64(l);
-        }
-        if let Some(t) = f.task_seconds {
-            opts.task_seconds = t;
-        }
-        if let Some(v) = f.verify_fraction {
-            opts.verify_fraction = v;
-        }
-    }
-    let token_file = a.token_file.clone().or_else(|| file.as_ref().and_then(|f| f.token_file.clone()));
-    opts.token = Some(match token_file {
-        Some(p) => config::read_token(&p).map_err(anyhow::Error::msg)?,
-        None => match std::env::var("SKY_FARM_TOKEN") {
-            Ok(t) if !t.trim().is_empty() => t.trim().to_string(),
-            _ => return usage("a farm needs its token: --token-file FILE, token_file in the farm file, or SKY_FARM_TOKEN"),
-        },
-    });
-    let (ca, domain) = match (&a.tls_ca, file.as_ref().and_then(|f| f.tls.clone())) {
-        (Some(ca), t) => (Some(ca.clone()), t.and_then(|t| t.domain)),
-        (None, Some(t)) => (Some(t.ca), t.domain),
-        (None, None) => (None, None),
-    };
-    if let Some(ca) = &ca {
-        let pem = std::fs::read(ca).with_context(|| format!("--tls-ca {}", ca.display()))?;
-        let mut tls = tonic::transport::ClientTlsConfig::new().ca_certificate(tonic::transport::Certificate::from_pem(pem));
-        if let Some(d) = domain {
-            tls = tls.domain_name(d);
-        }
-        opts.tls = Some(tls);
-    }
-    let workers = entries
-        .into_iter()
-        .map(|(name, address)| {
-            let uri = config::worker_uri(&address, ca.is_some());
-            WorkerSpec::Remote { name, uri }
-        })
-        .collect();
-    Ok(Some((workers, opts)))
 }
 
 fn parse_size(s: &str) -> Result<(usize, usize), String> {
@@ -296,7 +232,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     if a.resume && a.out.is_none() {
         return usage("--resume continues OUT.exr.journal and needs --out");
     }
-    let plan = farm_plan(&a)?;
+    let plan = super::farm_args::farm_plan(&a.farm)?;
     let (atm, bundle) = match Atmosphere::load_bundle(&a.atmosphere) {
         Ok(x) => x,
         Err(e) => {

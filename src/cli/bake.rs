@@ -1,0 +1,185 @@
+//! `sky bake-luts`: argument handling and the display of the bake's events;
+//! the bake itself is `sky::bake`.
+
+use super::farm_args::{farm_plan, FarmArgs};
+use super::progress::{fmt_duration, Style};
+use super::{usage, EXIT_INVALID};
+use anyhow::Result;
+use indicatif::{ProgressBar, ProgressStyle};
+use sky::bake::{self, BakeEvent, BakeFile, BakeOptions, BakeSink, Quality, SliceCache, SliceId};
+use sky::farm::coordinator::{Options, WorkerSpec};
+use sky::mie::MieCache;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+#[derive(clap::Args, Debug)]
+#[command(
+    after_help = "Examples:\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality draft\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality final --farm farm/farm.toml\n\nA re-run with nothing changed renders nothing: rendered slices are kept in a content-addressed cache (--cache, default OUT/cache), so a bake that was stopped resumes where it stopped."
+)]
+pub struct BakeArgs {
+    /// The bake file: basis skies, atmosphere files, slice sizes, quality presets
+    #[arg(value_name = "BAKE.toml")]
+    bake: PathBuf,
+    /// Output folder for the LUT files and manifest.json
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Quality preset of the bake file
+    #[arg(long, value_enum, default_value = "draft")]
+    quality: QualityArg,
+    /// The slice cache (default: OUT/cache)
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
+    /// Only these slices, NAME:INDEX (repeatable or comma-separated), into the cache; nothing is packed
+    #[arg(long, value_delimiter = ',', value_name = "NAME:INDEX")]
+    slice: Vec<SliceId>,
+    /// Threads of the embedded worker (default: all cores)
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print a JSON summary on stdout (files, sizes, per-slice cost, errors)
+    #[arg(long)]
+    json: bool,
+    /// Progress as JSON lines on stdout instead of a bar or lines on stderr
+    #[arg(long)]
+    json_progress: bool,
+    #[command(flatten)]
+    farm: FarmArgs,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum QualityArg {
+    Draft,
+    Final,
+}
+
+/// Seconds between plain progress lines.
+const LINE_PERIOD: Duration = Duration::from_secs(5);
+
+/// Turns bake events into a bar (terminal), plain lines (a log) or JSON lines.
+fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
+    let last_line: Mutex<Option<Instant>> = Mutex::new(None);
+    BakeSink::new(move |e| {
+        if style == Style::Json {
+            if let Ok(s) = serde_json::to_string(e) {
+                outln!("{s}");
+            }
+            return;
+        }
+        let say = |text: String| match bar.lock().unwrap().as_ref() {
+            Some(b) => b.println(text),
+            None => eprintln!("{text}"),
+        };
+        match e {
+            BakeEvent::Planned { skies, slices_total, slices_cached, texels_to_render } => {
+                say(format!("sky bake-luts: {skies} basis skies, {slices_total} slices, {slices_cached} in the cache, {texels_to_render} texels to render"));
+                if style == Style::Bars && *texels_to_render > 0 {
+                    let b = ProgressBar::new(*texels_to_render);
+                    b.set_style(ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} texels  {msg}").unwrap());
+                    *bar.lock().unwrap() = Some(b);
+                }
+            }
+            BakeEvent::Preparing { sky } => {
+                if style == Style::Lines {
+                    eprintln!("sky bake-luts: {sky}: preparing the optics");
+                }
+            }
+            BakeEvent::Slice { .. } => {}
+            BakeEvent::SkyDone { sky, slices_rendered, slices_cached, core_seconds } => {
+                say(format!(
+                    "sky bake-luts: {sky}: {slices_rendered} slices rendered ({:.1} core-s, {:.2} core-s per slice), {slices_cached} from the cache",
+                    core_seconds,
+                    core_seconds / (*slices_rendered).max(1) as f64
+                ));
+            }
+            BakeEvent::Progress(p) => {
+                let eta = p.eta_s.map_or("unknown".to_string(), fmt_duration);
+                let msg = match &p.stalled {
+                    Some(why) => format!("waiting: {why}"),
+                    None => format!("{}:{}  ETA {eta}", p.sky, p.index),
+                };
+                match style {
+                    Style::Bars => {
+                        if let Some(b) = bar.lock().unwrap().as_ref() {
+                            b.set_position(p.texels_done);
+                            b.set_message(msg);
+                        }
+                    }
+                    _ => {
+                        let mut last = last_line.lock().unwrap();
+                        if last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
+                            *last = Some(Instant::now());
+                            let pct = 100.0 * p.texels_done as f64 / p.texels_total.max(1) as f64;
+                            eprintln!(
+                                "sky bake-luts: {pct:.0} % ({}/{} texels, {}/{} slices), elapsed {}, {msg}",
+                                p.texels_done,
+                                p.texels_total,
+                                p.slices_done,
+                                p.slices_total,
+                                fmt_duration(p.elapsed_s)
+                            );
+                        }
+                    }
+                }
+            }
+            BakeEvent::Farm { sky, index, farm } => say(format!("sky bake-luts: {sky}:{index}: {}", serde_json::to_string(farm).unwrap_or_default())),
+        }
+    })
+}
+
+pub fn run(a: BakeArgs) -> Result<ExitCode> {
+    if a.threads == Some(0) {
+        return usage("--threads must be at least 1");
+    }
+    let bake = match BakeFile::load(&a.bake) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("{e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let quality = match a.quality {
+        QualityArg::Draft => Quality::Draft,
+        QualityArg::Final => Quality::Final,
+    };
+    let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let (workers, farm) = match farm_plan(&a.farm)? {
+        Some(plan) => plan,
+        None => (vec![WorkerSpec::Local { threads }], Options::default()),
+    };
+    let cores = workers.iter().map(|w| if let WorkerSpec::Local { threads } = w { *threads } else { 0 }).sum::<usize>().max(1);
+    let cache_dir = a.cache.clone().unwrap_or_else(|| a.out.join("cache"));
+    let cache = match SliceCache::open(&cache_dir) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("sky bake-luts: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let style = Style::choose(a.json_progress);
+    let bar = Arc::new(Mutex::new(None));
+    let opts = BakeOptions { quality, cache, workers, farm, cores, only: (!a.slice.is_empty()).then(|| a.slice.clone()), events: Some(sink(style, bar.clone())) };
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let c = cancel.clone();
+        let _ = ctrlc::set_handler(move || c.store(true, Ordering::SeqCst));
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let started = Instant::now();
+    let result = pool.install(|| bake::render_slices(&bake, &opts, &MieCache::from_env(), cancel));
+    if let Some(b) = bar.lock().unwrap().take() {
+        b.finish_and_clear();
+    }
+    let skies = match result {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("sky bake-luts: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let rendered: usize = skies.iter().map(|s| s.rendered).sum();
+    let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum();
+    eprintln!("sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.2} core-hours when rendered", started.elapsed().as_secs_f64(), core_s / 3600.0);
+    Ok(ExitCode::SUCCESS)
+}
