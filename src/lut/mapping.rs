@@ -37,10 +37,14 @@ pub const SLICES: usize = UPPER_SLICES + LOWER_SLICES;
 pub const LOWEST_SUN_ZENITH_DEG: f64 = 100.0;
 
 // The concept code's constants of the nonlinear v transform (upper region).
-const A: f64 = 0.50;
-const B: f64 = 0.80;
-const C: f64 = 0.25;
-const D: f64 = 0.50;
+/// The concept code's "nonlinear transformations" of v (upper region):
+/// knots a, b and their images c, d (b → d = 0.5 puts the horizon at v = b).
+pub const A: f64 = 0.50;
+pub const B: f64 = 0.80;
+pub const C: f64 = 0.25;
+pub const D: f64 = 0.50;
+/// The concept code's exponent p of the first two arcs.
+pub const P: f64 = 2.0;
 
 /// The sun zenith angle of time slice `index` (0..64), degrees, for a planet
 /// of `radius_km` with its atmosphere's top at `top_km`.
@@ -71,7 +75,7 @@ pub fn slice_coordinate(sun_zenith_deg: f64, radius_km: f64, top_km: f64) -> f64
 }
 
 /// d_max: the distance from the ground to the top along the horizon.
-fn horizontal_distance_km(radius_km: f64, top_km: f64) -> f64 {
+pub fn horizontal_distance_km(radius_km: f64, top_km: f64) -> f64 {
     let r_top = radius_km + top_km;
     (r_top * r_top - radius_km * radius_km).sqrt()
 }
@@ -173,9 +177,16 @@ impl DirectionMapping {
     /// The texture position of direction `d` (any length; its mirror image
     /// when y < 0): the inverse of [`direction`](Self::direction).
     pub fn uv(&self, d: DVec3) -> (f64, f64) {
+        self.uv_in_region(d, self.sun_centred())
+    }
+
+    /// [`uv`](Self::uv) in a chosen region: a decoder that blends a slice
+    /// of each region (the sun between the two slices around the threshold)
+    /// reads each slice in the region it was rendered in.
+    pub fn uv_in_region(&self, d: DVec3, sun_centred: bool) -> (f64, f64) {
         let d = DVec3::new(d.x, d.y.abs(), d.z).normalize();
         let theta_sun = self.sun_zenith_deg.to_radians();
-        if self.sun_centred() {
+        if sun_centred {
             let (s, t, b) = sun_frame(theta_sun);
             let theta = angle(d, s);
             let (x, y) = (d.dot(t), d.dot(b));

@@ -1,0 +1,259 @@
+//! The reference decoder: what a runtime does with a bake, on the CPU. For
+//! a sun elevation, haziness, cloudiness and view direction it takes, in
+//! each basis sky the weather rule weights, the fractional slice of the sun
+//! (the time mapping's inverse), the direction's (u, v) through the mapping
+//! of the actual sun (each slice read in the region it was rendered in),
+//! bilinear filtering at texel centres with clamp-to-edge (the mirror at
+//! u = 0 and 1), each slice's scale, and linear interpolation between the
+//! two slices; then it blends the basis skies. The GPU preview must match
+//! it.
+
+use super::manifest::{Manifest, SkyEntry};
+use super::mapping::{self, DirectionMapping};
+use super::weather::basis_weights;
+use glam::DVec3;
+
+/// One basis sky's texture array as stored (values before the slice scale).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Texture {
+    pub width: usize,
+    pub height: usize,
+    /// By layer, row-major (rows of v, top to bottom), linear RGB.
+    pub layers: Vec<Vec<[f32; 3]>>,
+}
+
+/// A bake, loaded.
+#[derive(Debug, Clone)]
+pub struct Luts {
+    pub manifest: Manifest,
+    /// In the manifest's sky order.
+    pub textures: Vec<Texture>,
+}
+
+/// Where a direction is read: sun zenith angle, the direction in the frame
+/// with the sun at azimuth 0.
+fn rotate_to_sun_frame(d: DVec3, sun_azimuth_deg: f64) -> DVec3 {
+    let (s, c) = (libm::sin(sun_azimuth_deg.to_radians()), libm::cos(sun_azimuth_deg.to_radians()));
+    DVec3::new(c * d.x + s * d.y, -s * d.x + c * d.y, d.z)
+}
+
+impl Texture {
+    /// Bilinear filtering of layer `layer` at (u, v), texel centres at
+    /// ((x + 0.5) / width, (y + 0.5) / height), clamped to the edge.
+    pub fn bilinear(&self, layer: usize, u: f64, v: f64) -> [f64; 3] {
+        let (w, h) = (self.width, self.height);
+        let x = u * w as f64 - 0.5;
+        let y = v * h as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let clampi = |i: f64, n: usize| (i.max(0.0) as usize).min(n - 1);
+        let (xa, xb) = (clampi(x0, w), clampi(x0 + 1.0, w));
+        let (ya, yb) = (clampi(y0, h), clampi(y0 + 1.0, h));
+        let t = &self.layers[layer];
+        let at = |x: usize, y: usize| t[y * w + x];
+        let mut out = [0.0; 3];
+        for (c, o) in out.iter_mut().enumerate() {
+            let top = at(xa, ya)[c] as f64 * (1.0 - fx) + at(xb, ya)[c] as f64 * fx;
+            let bottom = at(xa, yb)[c] as f64 * (1.0 - fx) + at(xb, yb)[c] as f64 * fx;
+            *o = top * (1.0 - fy) + bottom * fy;
+        }
+        out
+    }
+}
+
+/// One basis sky's linear RGB toward `dir` (world frame, z up) with the
+/// sun at `sun_zenith_deg`, `sun_azimuth_deg`.
+pub fn sample_sky(entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, sun_azimuth_deg: f64, dir: DVec3) -> [f64; 3] {
+    let s = mapping::slice_coordinate(sun_zenith_deg, entry.planet_radius_km, entry.top_km);
+    let last = entry.layers - 1;
+    let i0 = (s.floor() as usize).min(last.saturating_sub(1));
+    let f = (s - i0 as f64).clamp(0.0, 1.0);
+    let d = rotate_to_sun_frame(dir, sun_azimuth_deg);
+    // The mapping of the actual sun; each slice in its own region.
+    let m = DirectionMapping::new(sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG), entry.threshold_sun_zenith_deg);
+    let mut out = [0.0; 3];
+    for (layer, weight) in [(i0, 1.0 - f), ((i0 + 1).min(last), f)] {
+        if weight == 0.0 {
+            continue;
+        }
+        let slice = &entry.slices[layer];
+        let (u, v) = m.uv_in_region(d, slice.sun_zenith_deg <= entry.threshold_sun_zenith_deg);
+        let rgb = texture.bilinear(layer, u, v);
+        let scale = (-slice.scale_log2 as f64).exp2();
+        for c in 0..3 {
+            out[c] += weight * scale * rgb[c];
+        }
+    }
+    out
+}
+
+impl Luts {
+    /// Linear RGB (the manifest's colour space) toward `dir` (world frame,
+    /// z up) for a sun at `sun_elevation_deg` (and azimuth), haziness and
+    /// cloudiness in [0, 1].
+    pub fn sample(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3) -> [f64; 3] {
+        let w = basis_weights(haziness, cloudiness);
+        let mut out = [0.0; 3];
+        for (k, name) in super::weather::BASIS.iter().enumerate() {
+            if w[k] == 0.0 {
+                continue;
+            }
+            // A bake without this basis sky gives it no weight; the rest is
+            // renormalised below.
+            let Some(i) = self.manifest.skies.iter().position(|s| s.name == *name) else { continue };
+            let rgb = sample_sky(&self.manifest.skies[i], &self.textures[i], 90.0 - sun_elevation_deg, sun_azimuth_deg, dir);
+            for c in 0..3 {
+                out[c] += w[k] * rgb[c];
+            }
+        }
+        let present: f64 = super::weather::BASIS.iter().enumerate().filter(|(_, n)| self.manifest.skies.iter().any(|s| s.name == **n)).map(|(k, _)| w[k]).sum();
+        if present > 0.0 && present < 1.0 {
+            out = out.map(|x| x / present);
+        }
+        out
+    }
+
+    /// [`Luts::sample`] as CIE XYZ (Y in cd/m²).
+    pub fn sample_xyz(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3) -> [f64; 3] {
+        mat_mul(&self.manifest.colour.xyz_from_rgb, self.sample(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, dir))
+    }
+}
+
+pub fn mat_mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lut::manifest::SliceEntry;
+
+    const R: f64 = 6371.0;
+    const TOP: f64 = 100.0;
+
+    /// A smooth sky of world direction and sun: brighter toward the sun
+    /// and the horizon.
+    fn sky(d: DVec3, sun: DVec3) -> [f64; 3] {
+        let c = d.dot(sun);
+        let base = 1.0 + 0.6 * c + 0.3 * c * c + 0.4 * (1.0 - d.z.abs());
+        [base, 2.0 * base, 0.5 + base]
+    }
+
+    fn entry_and_texture(w: usize, h: usize) -> (SkyEntry, Texture) {
+        let threshold = mapping::default_threshold_deg(w, h);
+        let mut slices = Vec::new();
+        let mut layers = Vec::new();
+        for i in 0..mapping::SLICES {
+            let z = mapping::slice_sun_zenith_deg(i, R, TOP);
+            let m = DirectionMapping::new(z, threshold);
+            let sun = crate::render::camera::direction_deg(z, 0.0);
+            let scale_log2 = (i % 5) as i32 - 2;
+            let layer = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| {
+                let d = m.direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
+                sky(d, sun).map(|v| (v * (scale_log2 as f64).exp2()) as f32)
+            });
+            layers.push(layer.collect());
+            slices.push(SliceEntry { index: i, sun_zenith_deg: z, scale_log2, mean_samples: 1.0, median_rel_stderr_y: 0.0, core_seconds: 0.0 });
+        }
+        let entry = SkyEntry {
+            name: "clear".into(),
+            file: String::new(),
+            format: String::new(),
+            vk_format: 122,
+            bytes: 0,
+            width: w,
+            height: h,
+            layers: mapping::SLICES,
+            atmosphere: String::new(),
+            atmosphere_hash: String::new(),
+            altitude_m: 0.0,
+            planet_radius_km: R,
+            top_km: TOP,
+            d_min_km: TOP,
+            d_max_km: mapping::horizontal_distance_km(R, TOP),
+            threshold_sun_zenith_deg: threshold,
+            slices,
+            texels_clamped: 0,
+            texels_denormal: 0,
+            texels_negative_rgb: 0,
+        };
+        (entry, Texture { width: w, height: h, layers })
+    }
+
+    #[test]
+    fn texel_centres_of_a_slice_decode_to_their_texels() {
+        let (e, t) = entry_and_texture(32, 128);
+        for i in [0, 10, 30, 46, 47, 50, 63] {
+            let z = e.slices[i].sun_zenith_deg;
+            let m = DirectionMapping::new(z, e.threshold_sun_zenith_deg);
+            for (x, y) in [(0, 0), (5, 17), (31, 100), (16, 127), (20, 64)] {
+                let d = m.direction((x as f64 + 0.5) / 32.0, (y as f64 + 0.5) / 128.0);
+                // Any sun azimuth: the direction turns with the sun.
+                let az: f64 = 37.0;
+                let (s, c) = (az.to_radians().sin(), az.to_radians().cos());
+                let world = DVec3::new(c * d.x - s * d.y, s * d.x + c * d.y, d.z);
+                let got = sample_sky(&e, &t, z, az, world);
+                let want = sky(d, crate::render::camera::direction_deg(z, 0.0));
+                for c in 0..3 {
+                    assert!((got[c] / want[c] - 1.0).abs() < 1e-5, "slice {i} texel ({x}, {y}): {got:?} vs {want:?}");
+                }
+                // And its mirror image reads the same texel.
+                let mirror = sample_sky(&e, &t, z, 0.0, DVec3::new(d.x, -d.y, d.z));
+                assert!((mirror[1] / want[1] - 1.0).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn the_decoded_sky_has_no_step_in_time() {
+        // Along the sun's elevation in 0.05 degree steps, across every slice
+        // boundary and the switch between the two direction mappings, the
+        // decoded sky moves by at most a small fraction per step: the
+        // decoder interpolates, it never jumps. (A sun above the horizon
+        // moves the sky's pattern by up to 0.05 degrees of 11 per texel in
+        // u: well under 1 %.) Not at the zenith: below the threshold the
+        // latitude-longitude mapping's first row lies 11 degrees from the
+        // zenith (its transform has infinite slope at v = 0), so the zenith
+        // reads that row, and the step from the last sun-centred slice to
+        // the first latitude-longitude one is as large as the sky's change
+        // over those 11 degrees (`sky lut verify` measures it on real skies).
+        // Likewise, across the one slice interval where the mapping switches,
+        // the two slices sample a direction differently, and a step there is
+        // allowed up to 3 %.
+        let (e, t) = entry_and_texture(32, 128);
+        let switch = e.slices.iter().position(|s| s.sun_zenith_deg > e.threshold_sun_zenith_deg).unwrap();
+        let switch_zenith_deg = (e.slices[switch - 1].sun_zenith_deg, e.slices[switch].sun_zenith_deg);
+        for (zen, az) in [(25.0, 0.0), (45.0, 30.0), (80.0, 170.0), (89.0, 90.0), (60.0, 300.0), (88.0, 5.0)] {
+            let d = crate::render::camera::direction_deg(zen, az);
+            let mut last: Option<f64> = None;
+            for k in 0..=2000 {
+                let elev = -10.0 + k as f64 * 0.05;
+                let y = sample_sky(&e, &t, 90.0 - elev, 0.0, d)[1];
+                if let Some(l) = last {
+                    let bound = if (switch_zenith_deg.0..=switch_zenith_deg.1 + 0.05).contains(&(90.0 - elev)) { 0.03 } else { 0.01 };
+                    assert!((y / l - 1.0).abs() < bound, "direction ({zen}, {az}), sun elevation {elev}: {l} -> {y}");
+                }
+                last = Some(y);
+            }
+        }
+    }
+
+    #[test]
+    fn basis_skies_blend_by_the_weather_rule() {
+        let (mut e, t) = entry_and_texture(8, 16);
+        let mut hazed = e.clone();
+        hazed.name = "hazed".into();
+        let t2 = Texture { layers: t.layers.iter().map(|l| l.iter().map(|p| p.map(|v| 3.0 * v)).collect()).collect(), ..t.clone() };
+        e.name = "clear".into();
+        let manifest = crate::lut::manifest::tests::manifest_with(vec![e, hazed]);
+        let luts = Luts { manifest, textures: vec![t, t2] };
+        let d = crate::render::camera::direction_deg(50.0, 20.0);
+        let clear = luts.sample(30.0, 0.0, 0.0, 0.0, d);
+        let half = luts.sample(30.0, 0.0, 0.5, 0.0, d);
+        assert!((half[1] / clear[1] - 2.0).abs() < 1e-6, "{half:?} {clear:?}");
+        // Cloudiness moves toward basis skies this bake lacks: what is
+        // present is renormalised, so the sky neither darkens nor vanishes.
+        let cloudy = luts.sample(30.0, 0.0, 0.5, 0.1, d);
+        assert!((cloudy[1] / clear[1] - 2.0).abs() < 1e-6, "{cloudy:?} {clear:?}");
+    }
+}

@@ -1,0 +1,197 @@
+//! The manifest of a bake (`manifest.json`): what a runtime needs to use
+//! the LUT files without reading this code. Versioned: a reader refuses a
+//! major version it does not know; fields are only added within one.
+//! Documented in the README ("The LUT manifest").
+
+use serde::{Deserialize, Serialize};
+
+/// The manifest's format name and version.
+pub const FORMAT: &str = "sky-lut-manifest";
+pub const VERSION: u32 = 1;
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Manifest {
+    pub format: String,
+    pub version: u32,
+    /// "sky 0.1.0".
+    pub generator: String,
+    /// "draft" or "final".
+    pub quality: String,
+    /// What a decoded texel means.
+    pub units: Units,
+    pub colour: Colour,
+    pub time_mapping: TimeMapping,
+    pub direction_mapping: DirectionMappingInfo,
+    pub weather: Weather,
+    /// The basis skies in the talk's order.
+    pub skies: Vec<SkyEntry>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Units {
+    /// "cd/m^2": Y of CIE 1931 XYZ times 683 lm/W.
+    pub luminance: String,
+    /// How a stored texel becomes a value: value = stored * 2^-scale_log2 of its slice,
+    /// applied to each slice before slices are interpolated.
+    pub scale: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Colour {
+    /// "rec709", "rec2020", "acescg" or "xyz".
+    pub space: String,
+    /// Linear RGB = matrix · XYZ, rows R, G, B.
+    pub rgb_from_xyz: [[f64; 3]; 3],
+    pub xyz_from_rgb: [[f64; 3]; 3],
+    pub note: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TimeMapping {
+    pub slices: usize,
+    pub upper_slices: usize,
+    pub lower_slices: usize,
+    /// Upper region: d_i = lerp(d_min, d_max, i / (upper_slices - 1)), the sun
+    /// zenith angle the one whose path from the ground to the top is d_i.
+    pub upper: String,
+    /// Lower region: θ_z = lerp(90°, lowest, ((i - upper_slices) / (lower_slices - 1))^2).
+    pub lower: String,
+    pub lowest_sun_zenith_deg: f64,
+    /// What a decoder does for a sun lower than the lowest slice.
+    pub below_lowest: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DirectionMappingInfo {
+    /// Texel (x, y) of a layer is the cell centred on (u, v) = ((x + 0.5) / width, (y + 0.5) / height).
+    pub texels: String,
+    /// The frame: z the zenith, the sun at azimuth 0 in the x-z plane.
+    pub frame: String,
+    /// u covers the half y ≥ 0; a direction with y < 0 reads its mirror image.
+    pub u_mirror: bool,
+    /// The sun-centred mapping's nonlinear v transform: knots a, b and their images c, d, exponent p.
+    pub a: f64,
+    pub b: f64,
+    pub c: f64,
+    pub d: f64,
+    pub p: f64,
+    pub upper: String,
+    pub lower: String,
+    /// What a decoder does between two slices.
+    pub interpolation: String,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Weather {
+    pub basis_order: Vec<String>,
+    pub rule: String,
+    pub cloudy_step: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SkyEntry {
+    pub name: String,
+    /// The LUT file, relative to the manifest.
+    pub file: String,
+    /// "B10G11R11_UFLOAT_PACK32" (vkFormat 122).
+    pub format: String,
+    pub vk_format: u32,
+    pub bytes: u64,
+    pub width: usize,
+    pub height: usize,
+    pub layers: usize,
+    pub atmosphere: String,
+    pub atmosphere_hash: String,
+    pub altitude_m: f64,
+    pub planet_radius_km: f64,
+    pub top_km: f64,
+    pub d_min_km: f64,
+    pub d_max_km: f64,
+    /// The sun zenith angle beyond which a slice is latitude-longitude.
+    pub threshold_sun_zenith_deg: f64,
+    pub slices: Vec<SliceEntry>,
+    pub texels_clamped: u64,
+    pub texels_denormal: u64,
+    pub texels_negative_rgb: u64,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SliceEntry {
+    pub index: usize,
+    pub sun_zenith_deg: f64,
+    /// Stored = value * 2^scale_log2.
+    pub scale_log2: i32,
+    pub mean_samples: f64,
+    /// Median over the slice of the standard error of Y over Y.
+    pub median_rel_stderr_y: f64,
+    pub core_seconds: f64,
+}
+
+/// The manifest's fixed descriptions, shared by the writer and the docs.
+pub fn time_mapping() -> TimeMapping {
+    use super::mapping::*;
+    TimeMapping {
+        slices: SLICES,
+        upper_slices: UPPER_SLICES,
+        lower_slices: LOWER_SLICES,
+        upper: "d_i = lerp(d_min, d_max, i / 47): d_min = top_km (the vertical path), d_max = sqrt((R + top)^2 - R^2) (the horizontal one); the slice's sun zenith angle is the one whose path from the ground to the top is d_i: cos(theta) = (h^2 - d_i^2) / (2 R d_i), h^2 = (R + top)^2 - R^2".into(),
+        lower: "theta_z = lerp(90 deg, 100 deg, ((i - 48) / 15)^2)".into(),
+        lowest_sun_zenith_deg: LOWEST_SUN_ZENITH_DEG,
+        below_lowest: "clamp to the last slice".into(),
+    }
+}
+
+pub fn direction_mapping() -> DirectionMappingInfo {
+    use super::mapping::*;
+    DirectionMappingInfo {
+        texels: "texel (x, y) of a layer covers the cell centred on (u, v) = ((x + 0.5) / width, (y + 0.5) / height); row y = 0 is first in memory (KTXorientation \"rd\")".into(),
+        frame: "z is the zenith; the sun lies in the x-z plane at azimuth 0; azimuth runs from +x toward +y".into(),
+        u_mirror: true,
+        a: A,
+        b: B,
+        c: C,
+        d: D,
+        p: P,
+        upper: "sun zenith <= threshold: the talk's uvToWorldSpaceDirection, sun-centred branch: phi = u pi, the heading about the sun from the tangent pointing down toward the horizon below it; v' = the nonlinear transform of v (a, b, c, d, p); edge = pi/2 - atan(sin(pi/2 - phi) tan(theta_sun)); theta = v'/0.5 edge for v' <= 0.5, else (v'/0.5 - 1)(pi - edge) + edge; the horizon is the line v = b".into(),
+        lower: "sun zenith > threshold: latitude-longitude, zenith angle = pi v'' with v'' = the two-arc transform about K = min(0.5, theta_sun / pi), azimuth from the sun = u pi".into(),
+        interpolation: "the direction's (u, v) from the mapping of the actual sun zenith angle (in each slice's own region), bilinear at texel centres with clamp-to-edge (which is the mirror at u = 0 and 1), each slice times 2^-scale_log2, then linear in the slice coordinate between the two slices around it".into(),
+    }
+}
+
+pub fn weather() -> Weather {
+    use super::weather::*;
+    Weather {
+        basis_order: BASIS.iter().map(|s| s.to_string()).collect(),
+        rule: "haziness h and cloudiness c in [0, 1]. c < 1/6: (1 - c/s)((1 - h) clear + h hazed) + (c/s) cloudy0, s = 1/6. c >= 1/6: p = (c - s)/s in [0, 5], the linear blend of cloudy(floor p) and cloudy(floor p + 1)".into(),
+        cloudy_step: CLOUDY_STEP,
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A manifest around the given skies (for decoder tests).
+    pub fn manifest_with(skies: Vec<SkyEntry>) -> Manifest {
+        let i = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        Manifest {
+            format: FORMAT.into(),
+            version: VERSION,
+            generator: format!("sky {}", crate::VERSION),
+            quality: "draft".into(),
+            units: Units { luminance: "cd/m^2".into(), scale: String::new() },
+            colour: Colour { space: "xyz".into(), rgb_from_xyz: i, xyz_from_rgb: i, note: String::new() },
+            time_mapping: time_mapping(),
+            direction_mapping: direction_mapping(),
+            weather: weather(),
+            skies,
+        }
+    }
+
+    #[test]
+    fn manifests_round_trip_through_json() {
+        let m = manifest_with(Vec::new());
+        let text = serde_json::to_string_pretty(&m).unwrap();
+        assert_eq!(serde_json::from_str::<Manifest>(&text).unwrap(), m);
+    }
+}
