@@ -1,4 +1,7 @@
 //! Look-up tables for real-time engines: the talk's adaptive mappings
-//! (time slices and sky directions).
+//! (time slices and sky directions) and the texture formats the tables are
+//! stored in.
 
 pub mod mapping;
+pub mod minifloat;
+pub mod r11g11b10;
