@@ -38,7 +38,7 @@ regen-data:
 	python3 -m venv .venv-data && .venv-data/bin/pip install -q -r scripts/requirements-data.txt && .venv-data/bin/python scripts/regen_data.py
 
 regen-reference:
-	python3 -m venv .venv-ref && .venv-ref/bin/pip install -q -r scripts/requirements-reference.txt && .venv-ref/bin/python scripts/regen_reference.py
+	python3 -m venv .venv-ref && .venv-ref/bin/pip install -q -r scripts/requirements-reference.txt && .venv-ref/bin/python scripts/regen_reference.py && .venv-ref/bin/python scripts/regen_colour_spaces.py
 
 clean:
 	rm -rf $(OUT)

@@ -2,6 +2,7 @@
 //! (time slices and sky directions) and the texture formats the tables are
 //! stored in.
 
+pub mod colour;
 pub mod mapping;
 pub mod minifloat;
 pub mod r11g11b10;
