@@ -3,6 +3,8 @@
 //! stored in.
 
 pub mod colour;
+pub mod ktx2;
 pub mod mapping;
 pub mod minifloat;
 pub mod r11g11b10;
+pub mod rgba16f;
