@@ -3,7 +3,7 @@
 //!
 //! Each RGB space is defined by its primaries and white point, and its
 //! matrix is derived from them in f64 (the normalised primary matrix,
-//! [RP177] §3.3): with P the matrix whose columns are the primaries' XYZ
+//! [RP177]): with P the matrix whose columns are the primaries' XYZ
 //! (x/y, 1, (1 − x − y)/y) and W the white's XYZ (Y = 1), S = P⁻¹ W and
 //! RGB → XYZ = P diag(S), so the white has R = G = B = 1.
 //!
@@ -212,7 +212,7 @@ pub fn xy_to_xyz([x, y]: [f64; 2]) -> [f64; 3] {
     [x / y, 1.0, (1.0 - x - y) / y]
 }
 
-/// RGB → XYZ of primaries `p` and white `w` ([RP177] §3.3).
+/// RGB → XYZ of primaries `p` and white `w` ([RP177]).
 pub fn normalised_primary_matrix(p: [[f64; 2]; 3], w: [f64; 2]) -> Mat3 {
     let cols = p.map(xy_to_xyz);
     let pm: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| cols[j][i]));

@@ -5,36 +5,30 @@
 //! [`super::r11g11b10`]) and VK_FORMAT_R16G16B16A16_SFLOAT (vkFormat 97,
 //! typeSize 2, [`super::rgba16f`]).
 //!
-//! File layout ([KTX2] §3 "File Structure"), all little-endian:
+//! File layout ([KTX2] "File Structure"), all little-endian:
 //!
 //! | bytes                 | content                                                   |
 //! |-----------------------|-----------------------------------------------------------|
 //! | 0–11                  | identifier «KTX 20»\r\n\x1A\n                               |
 //! | 12–79                 | header: vkFormat, typeSize, pixelWidth, pixelHeight, pixelDepth = 0, layerCount = N, faceCount = 1, levelCount = 1, supercompressionScheme = 0, then the index (dfd/kvd offsets and lengths, sgd offset and length 0) |
 //! | 80–103                | level index: byteOffset, byteLength, uncompressedByteLength (u64) of level 0 |
-//! | 104–                  | data format descriptor: dfdTotalSize, one Basic block ([KDFS] §5) |
+//! | 104–                  | data format descriptor: dfdTotalSize, one Basic block ([KDFS] "Khronos Basic Data Format Descriptor Block") |
 //! | after the DFD         | key/value data, sorted by key, each entry padded to 4 bytes |
-//! | aligned               | zero padding to a multiple of lcm(texel size, 4) ([KTX2] §3.9 mipPadding) |
+//! | aligned               | zero padding to a multiple of lcm(texel size, 4) ([KTX2] mipPadding) |
 //! | level 0               | the texels                                                |
 //!
-//! Texel order within level 0 ([KTX2] §4.1 "levelImages"): layers one after
-//! another, each layer its rows one after another, each row its texels
-//! left to right. Texel (x, y) of layer l is texel number
-//! (l · height + y) · width + x ([`texel_index`]). Row y = 0 comes first: it
-//! is the "top" row of KTXorientation "rd" (which the file states) and the
-//! row at texture coordinate t = 0 in Vulkan, Direct3D, Metal and OpenGL
-//! alike (each uploads the first row of data at t = 0). So a slice written
-//! in the order the `lut` camera renders it (pixel (x, y) is (u, v) =
-//! ((x + ½) / width, (y + ½) / height), rows top down) is sampled at
-//! texture coordinates (s, t) = (u, v): u = 0, v = 0 is the corner of texel
-//! (0, 0), the first texel of each layer, and layer l is slice l.
+//! Texel order within level 0 ([KTX2] "Level Images"): layers one after
+//! another, each layer its rows one after another (row y = 0 first), each
+//! row its texels left to right: [`super::texels`], which also says how
+//! that maps to the LUT's (u, v). Row y = 0 is the "top" row of
+//! KTXorientation "rd", which the file states.
 //!
-//! Key/value data ([KTX2] §3.11): `KTXorientation` = "rd", `KTXwriter` =
+//! Key/value data ([KTX2] "Key/Value Data"): `KTXorientation` = "rd", `KTXwriter` =
 //! "sky <version>", and `sky` = the caller's JSON (the manifest entry of the
 //! file), each value a NUL-terminated UTF-8 string, the entries sorted by
 //! the bytes of their keys as the specification requires.
 //!
-//! Data format descriptor ([KDFS] §5.5–5.20; the values match KTX-Software's
+//! Data format descriptor ([KDFS] Basic block fields; the values match KTX-Software's
 //! `vk2dfd` and the `ktx2` crate's `dfd::Basic::from_format`, checked in
 //! the tests): vendor 0 (Khronos), descriptor type 0 (basic), version 2,
 //! colour model RGBSDA (1), colour primaries from the texture's colour
@@ -49,7 +43,7 @@
 //! |            | B      | 22        | 10        | 2       | FLOAT            | 0                | 0x3F800000       |
 //! | RGBA16F    | R G B A| 0 16 32 48| 16        | 0 1 2 15| FLOAT, SIGNED    | 0xBF800000 (−1.0)| 0x3F800000       |
 //!
-//! (Float samples give their range as f32 bits, [KDFS] §5.19; for unsigned
+//! (Float samples give their range as f32 bits, [KDFS] sampleLower/sampleUpper; for unsigned
 //! floats the lower bound is 0.)
 //!
 //! Files are written to a temporary file in the destination's folder and
@@ -58,9 +52,10 @@
 //! [KTX2]: https://registry.khronos.org/KTX/specs/2.0/ktxspec.v2.html
 //! [KDFS]: https://registry.khronos.org/DataFormat/specs/1.3/dataformat.1.3.html
 
+use super::atomic::write_atomically;
 use super::colour::ColourSpace;
+use super::texels::Texels;
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The KTX 2.0 file identifier.
@@ -75,52 +70,20 @@ pub const SKY_KEY: &str = "sky";
 const HEADER_BYTES: usize = 80;
 const LEVEL_INDEX_BYTES: usize = 24;
 
-/// The texels of a texture, in the order of [`texel_index`].
-#[derive(Debug, Clone, Copy)]
-pub enum Texels<'a> {
-    /// R11G11B10 words ([`super::r11g11b10::pack`]).
-    B10G11R11(&'a [u32]),
-    /// RGBA halves ([`super::rgba16f::pack`]).
-    Rgba16f(&'a [[u16; 4]]),
+/// The format's vkFormat: 122 or 97.
+pub fn vk_format(texels: &Texels<'_>) -> u32 {
+    match texels {
+        Texels::B10G11R11(_) => VK_FORMAT_B10G11R11_UFLOAT_PACK32,
+        Texels::Rgba16f(_) => VK_FORMAT_R16G16B16A16_SFLOAT,
+    }
 }
 
-impl Texels<'_> {
-    fn len(&self) -> usize {
-        match self {
-            Texels::B10G11R11(t) => t.len(),
-            Texels::Rgba16f(t) => t.len(),
-        }
-    }
-
-    /// The format's vkFormat.
-    pub fn vk_format(&self) -> u32 {
-        match self {
-            Texels::B10G11R11(_) => VK_FORMAT_B10G11R11_UFLOAT_PACK32,
-            Texels::Rgba16f(_) => VK_FORMAT_R16G16B16A16_SFLOAT,
-        }
-    }
-
-    /// Bytes per texel.
-    pub fn texel_bytes(&self) -> usize {
-        match self {
-            Texels::B10G11R11(_) => 4,
-            Texels::Rgba16f(_) => 8,
-        }
-    }
-
-    /// The header's typeSize: the packed word for PACK32, one component otherwise.
-    fn type_size(&self) -> u32 {
-        match self {
-            Texels::B10G11R11(_) => 4,
-            Texels::Rgba16f(_) => 2,
-        }
-    }
-
-    fn write_le(&self, out: &mut Vec<u8>) {
-        match self {
-            Texels::B10G11R11(t) => t.iter().for_each(|w| out.extend_from_slice(&w.to_le_bytes())),
-            Texels::Rgba16f(t) => t.iter().flatten().for_each(|h| out.extend_from_slice(&h.to_le_bytes())),
-        }
+/// The header's typeSize: the packed word for PACK32 formats, one
+/// component otherwise ([KTX2] "typeSize").
+pub fn type_size(texels: &Texels<'_>) -> u32 {
+    match texels {
+        Texels::B10G11R11(_) => 4,
+        Texels::Rgba16f(_) => 2,
     }
 }
 
@@ -156,12 +119,6 @@ pub enum Ktx2Error {
     },
 }
 
-/// The position of texel (x, y) of layer `layer` in the texel array: the
-/// layout of level 0 (see the module documentation).
-pub fn texel_index(width: u32, height: u32, layer: u32, x: u32, y: u32) -> usize {
-    ((layer as usize * height as usize) + y as usize) * width as usize + x as usize
-}
-
 /// "sky <version>", the `KTXwriter` value.
 pub fn writer_name() -> String {
     format!("sky {}", env!("CARGO_PKG_VERSION"))
@@ -181,7 +138,7 @@ pub fn dfd_primaries(space: ColourSpace) -> u8 {
 pub fn data_format_descriptor(texels: &Texels<'_>, space: ColourSpace) -> Vec<u8> {
     // (bitOffset, bitLength, channel id) per sample, in bit order.
     let (samples, qualifiers, lower): (&[(u16, u8, u8)], u8, u32) = match texels {
-        // FLOAT = 0x80 (bit 7 of the channel byte, [KDFS] §5.18).
+        // FLOAT = 0x80 (bit 7 of the channel byte, [KDFS] channelType qualifiers).
         Texels::B10G11R11(_) => (&[(0, 11, 0), (11, 11, 1), (22, 10, 2)], 0x80, 0),
         // FLOAT | SIGNED = 0x80 | 0x40; lower = −1.0f.
         Texels::Rgba16f(_) => (&[(0, 16, 0), (16, 16, 1), (32, 16, 2), (48, 16, 15)], 0xC0, 0xBF80_0000),
@@ -247,7 +204,7 @@ pub fn encode(tex: &ArrayTexture<'_>) -> Result<Vec<u8>, Ktx2Error> {
 
     let dfd_offset = HEADER_BYTES + LEVEL_INDEX_BYTES;
     let kvd_offset = dfd_offset + dfd.len();
-    // Level data starts at a multiple of lcm(texel size, 4) ([KTX2] §3.9):
+    // Level data starts at a multiple of lcm(texel size, 4) ([KTX2] mipPadding):
     // 4 for R11G11B10, 8 for RGBA16F.
     let align = tex.texels.texel_bytes().max(4);
     let level_offset = (kvd_offset + kvd.len()).next_multiple_of(align);
@@ -258,7 +215,7 @@ pub fn encode(tex: &ArrayTexture<'_>) -> Result<Vec<u8>, Ktx2Error> {
 
     let mut out = Vec::with_capacity(level_offset + level_bytes);
     out.extend_from_slice(&IDENTIFIER);
-    for v in [tex.texels.vk_format(), tex.texels.type_size(), width, height, 0, layers, 1, 1, 0] {
+    for v in [vk_format(&tex.texels), type_size(&tex.texels), width, height, 0, layers, 1, 1, 0] {
         // vkFormat, typeSize, pixelWidth, pixelHeight, pixelDepth, layerCount,
         // faceCount, levelCount, supercompressionScheme.
         out.extend_from_slice(&v.to_le_bytes());
@@ -284,28 +241,14 @@ pub fn encode(tex: &ArrayTexture<'_>) -> Result<Vec<u8>, Ktx2Error> {
 /// rename). Returns the file's size in bytes.
 pub fn write(path: &Path, tex: &ArrayTexture<'_>) -> Result<u64, Ktx2Error> {
     let bytes = encode(tex)?;
-    write_atomically(path, &bytes)?;
+    write_atomically(path, &bytes).map_err(|source| Ktx2Error::Io { path: path.to_path_buf(), source })?;
     Ok(bytes.len() as u64)
-}
-
-/// Writes `bytes` to a temporary file next to `path` and renames it over
-/// `path`: either the old file or the whole new one, never part of it.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), Ktx2Error> {
-    let io = |source| Ktx2Error::Io { path: path.to_path_buf(), source };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::Builder::new().prefix(".sky-tmp-").tempfile_in(dir).map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lut::texels::texel_index;
     use crate::lut::{r11g11b10, rgba16f};
 
     fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -360,7 +303,7 @@ mod tests {
         assert_eq!(b.len(), lvl_off + lvl_len);
         assert_eq!(lvl_len, 1 << 20, "1 MiB per sunny basis sky");
 
-        // The DFD, byte by byte (KDFS 1.3 §5; the table in the module docs).
+        // The DFD, byte by byte (KDFS 1.3 Basic block; the table in the module docs).
         let mut want = vec![76, 0, 0, 0, 0, 0, 0, 0, 2, 0, 72, 0, 1, 1, 1, 0, 0, 0, 0, 0, 4, 0, 0, 0, 0, 0, 0, 0];
         for (off, bits, ch) in [(0u16, 11u8, 0u8), (11, 11, 1), (22, 10, 2)] {
             want.extend_from_slice(&off.to_le_bytes());
@@ -434,8 +377,8 @@ mod tests {
                 (ColourSpace::AcesCg, ::ktx2::ColorPrimaries::ACESCC),
                 (ColourSpace::Xyz, ::ktx2::ColorPrimaries::CIEXYZ),
             ] {
-                let (basic, type_size) = ::ktx2::dfd::Basic::from_format_with(format, false, Some(::ktx2::TransferFunction::Linear), Some(primaries), None).unwrap();
-                assert_eq!(type_size, texels.type_size(), "{format:?}");
+                let (basic, crate_type_size) = ::ktx2::dfd::Basic::from_format_with(format, false, Some(::ktx2::TransferFunction::Linear), Some(primaries), None).unwrap();
+                assert_eq!(crate_type_size, type_size(&texels), "{format:?}");
                 let block = ::ktx2::dfd::Block::Basic(basic).to_vec();
                 let ours = data_format_descriptor(&texels, space);
                 assert_eq!(u32_at(&ours, 0) as usize, 4 + block.len());

@@ -3,8 +3,8 @@
 //! (m = 6 for R and G, m = 5 for B) and the magnitude of IEEE binary16
 //! (m = 10).
 //!
-//! The formats ([Vulkan] §"Unsigned 11-Bit Floating-Point Numbers" and
-//! §"Unsigned 10-Bit Floating-Point Numbers"; binary16 is [IEEE 754-2008]
+//! The formats ([Vulkan] "Unsigned 11-Bit Floating-Point Numbers" and
+//! "Unsigned 10-Bit Floating-Point Numbers"; binary16 is [IEEE 754-2008]
 //! §3.6): with exponent field E and mantissa field M,
 //!
 //! - E = 0:        value = 2^-14 · M / 2^m            (denormal, or zero)
@@ -17,13 +17,15 @@
 //! Rounding. Vulkan leaves the rounding of conversions into these formats
 //! to the implementation. Direct3D ([D3D11], "Floating-point rules", the
 //! 11-bit and 10-bit and 16-bit rules) asks for results within 0.5 ULP and
-//! keeps denormals; OpenGL ([OpenGL 4.6] §2.3.4.3 and §2.3.4.4, from
-//! EXT_packed_float) clamps finite overflow to the largest finite value and
-//! negative values to 0. This module gives the one correctly rounded result
-//! those rules allow: round to nearest, ties to even, from the f64 value
-//! directly (one rounding, so no double rounding through f32), denormals
-//! kept, finite values above the largest clamped to it, negative values and
-//! −0 to +0. NaN and ±infinity are reported to the caller (`None`), never
+//! keeps denormals; OpenGL ([OpenGL 4.6] "Unsigned 11-Bit" and "Unsigned
+//! 10-Bit Floating-Point Numbers", from EXT_packed_float) rounds finite
+//! values to the closest representable finite value (allowing rounding
+//! toward zero), converts finite values above the maximum to the maximum
+//! and negative values to 0. This module gives the correctly rounded result
+//! within those rules, with IEEE 754's default tie rule: round to nearest,
+//! ties to even, from the f64 value directly (one rounding, so no double
+//! rounding through f32), denormals kept, finite values above the largest
+//! clamped to it, negative values and −0 to +0. NaN and ±infinity are reported to the caller (`None`), never
 //! encoded.
 //!
 //! [Vulkan]: https://registry.khronos.org/vulkan/specs/latest/html/vkspec.html#fundamentals-fp11

@@ -1,10 +1,12 @@
 //! Look-up tables for real-time engines: the talk's adaptive mappings
-//! (time slices and sky directions) and the texture formats the tables are
-//! stored in.
+//! (time slices and sky directions) and the texture formats and files the
+//! tables are stored in.
 
+pub mod atomic;
 pub mod colour;
 pub mod ktx2;
 pub mod mapping;
 pub mod minifloat;
 pub mod r11g11b10;
 pub mod rgba16f;
+pub mod texels;

@@ -4,9 +4,10 @@
 //! One little-endian 32-bit word per texel: R in bits 0–10 and G in bits
 //! 11–21 (5-bit exponent, 6-bit mantissa, 65024 at most), B in bits 22–31
 //! (5-bit exponent, 5-bit mantissa, 64512 at most); exponent bias 15, no
-//! sign ([Vulkan] §"Unsigned 11-Bit Floating-Point Numbers", §"Unsigned
-//! 10-Bit Floating-Point Numbers" and the format's packed layout, [KDFS]
-//! §10.3, §10.4).
+//! sign ([Vulkan] "Unsigned 11-Bit Floating-Point Numbers", "Unsigned
+//! 10-Bit Floating-Point Numbers" and the format's packed layout; [KDFS]
+//! "Unsigned 11-bit floating-point numbers", "Unsigned 10-bit
+//! floating-point numbers").
 //!
 //! Packing takes f64, the bake's precision, and rounds each channel once,
 //! exactly, to nearest with ties to even ([`super::minifloat`], where the
