@@ -4,6 +4,7 @@
 
 pub mod atomic;
 pub mod colour;
+pub mod dds;
 pub mod ktx2;
 pub mod mapping;
 pub mod minifloat;
