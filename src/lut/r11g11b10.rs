@@ -295,6 +295,45 @@ mod tests {
         }
     }
 
+    /// Against a brute-force oracle that shares no arithmetic with the
+    /// packer: the nearest of all finite codes by exhaustive search (ties to
+    /// the even code, above the largest the largest), for log-uniform values
+    /// from 2^-24 to 2^17 and for values near every code.
+    #[test]
+    fn matches_exhaustive_nearest_code() {
+        for c in Channel::ALL {
+            let codes: Vec<(u32, f64)> = (0..31u32 << c.mantissa_bits()).map(|k| (k, value(c, k))).collect();
+            let oracle = |v: f64| {
+                let mut best = (0u32, f64::INFINITY);
+                for &(k, x) in &codes {
+                    let d = (x - v).abs();
+                    if d < best.1 || (d == best.1 && k % 2 == 0) {
+                        best = (k, d);
+                    }
+                }
+                best.0
+            };
+            let mut state = 0x9E37_79B9_7F4A_7C15u64 ^ c.bit_offset() as u64;
+            let mut next = || {
+                // SplitMix64.
+                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                (z ^ (z >> 31)) as f64 / u64::MAX as f64
+            };
+            for _ in 0..20_000 {
+                let v = (next() * 41.0 - 24.0).exp2();
+                assert_eq!(single(c, v), oracle(v), "{c:?} {v:e}");
+            }
+            for &(_, x) in codes.iter().step_by(7) {
+                for v in [x * (1.0 + 1e-3), x * (1.0 - 1e-3), x + 1e-12, (x - 1e-12).max(0.0)] {
+                    assert_eq!(single(c, v), oracle(v), "{c:?} {v:e}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn array_statistics() {
         let texels = [
