@@ -3,18 +3,18 @@
 //!
 //! Each RGB space is defined by its primaries and white point, and its
 //! matrix is derived from them in f64 (the normalised primary matrix,
-//! [RP177]): with P the matrix whose columns are the primaries' XYZ
+//! RP177): with P the matrix whose columns are the primaries' XYZ
 //! (x/y, 1, (1 − x − y)/y) and W the white's XYZ (Y = 1), S = P⁻¹ W and
 //! RGB → XYZ = P diag(S), so the white has R = G = B = 1.
 //!
-//! - Rec.709: [BT709] primaries R (0.640, 0.330), G (0.300, 0.600),
+//! - Rec.709: BT709 primaries R (0.640, 0.330), G (0.300, 0.600),
 //!   B (0.150, 0.060), reference white D65 (0.3127, 0.3290). The primaries
 //!   and white of sRGB, but derived here, not IEC 61966-2-1's rounded
 //!   matrix (the two differ by about 2e-4; `render::output` uses the latter
 //!   for previews).
-//! - Rec.2020: [BT2020] (system colorimetry) primaries R (0.708, 0.292), G (0.170, 0.797),
+//! - Rec.2020: BT2020 (system colorimetry) primaries R (0.708, 0.292), G (0.170, 0.797),
 //!   B (0.131, 0.046), white D65 (0.3127, 0.3290).
-//! - ACEScg: [S-2014-004] AP1 primaries R (0.713, 0.293), G (0.165,
+//! - ACEScg: S-2014-004 AP1 primaries R (0.713, 0.293), G (0.165,
 //!   0.830), B (0.128, 0.044), the ACES white (0.32168, 0.33767), near but
 //!   not D60.
 //!
@@ -23,7 +23,7 @@
 //! be D65, the white of Rec.709 and Rec.2020, so those two need no
 //! adaptation (D65 light maps to R = G = B). For ACEScg, whose white is not
 //! D65, XYZ is first adapted from D65 to the ACES white with the linear
-//! Bradford transform ([Lam85]; the von Kries form M⁻¹ diag(ρ_ACES / ρ_D65) M
+//! Bradford transform (Lam85; the von Kries form M⁻¹ diag(ρ_ACES / ρ_D65) M
 //! of colour-science's `matrix_chromatic_adaptation_VonKries(...,
 //! transform="Bradford")`), the convention of the ACES transforms (aces-dev's
 //! D60↔D65 CATs are Bradford) and of OCIO's ACES configs for linear Rec.709 →
@@ -36,11 +36,15 @@
 //! Negative RGB (colours outside the space's gamut) is clamped to 0 and
 //! counted.
 //!
-//! [RP177]: SMPTE RP 177-1993, "Derivation of Basic Television Color Equations".
-//! [BT709]: https://www.itu.int/rec/R-REC-BT.709-6-201506-I
-//! [BT2020]: https://www.itu.int/rec/R-REC-BT.2020-2-201510-I
-//! [S-2014-004]: https://docs.acescentral.com/specifications/acescg/ ("ACEScg — A Working Space for CGI Render and Compositing", Academy S-2014-004)
-//! [Lam85]: K. M. Lam, "Metamerism and Colour Constancy", PhD thesis, University of Bradford, 1985; matrix as in colour-science `CAT_BRADFORD`.
+//! References:
+//! - RP177: SMPTE RP 177-1993, "Derivation of Basic Television Color Equations".
+//! - BT709: ITU-R BT.709-6, <https://www.itu.int/rec/R-REC-BT.709-6-201506-I>.
+//! - BT2020: ITU-R BT.2020-2, <https://www.itu.int/rec/R-REC-BT.2020-2-201510-I>.
+//! - S-2014-004: Academy S-2014-004, "ACEScg — A Working Space for CGI Render
+//!   and Compositing", <https://docs.acescentral.com/specifications/acescg/>.
+//! - Lam85: K. M. Lam, "Metamerism and Colour Constancy", PhD thesis,
+//!   University of Bradford, 1985; the matrix as in colour-science's
+//!   `CAT_BRADFORD`.
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -49,12 +53,12 @@ use std::str::FromStr;
 /// A 3×3 matrix, row-major: `out[i] = Σ_j m[i][j] · in[j]`.
 pub type Mat3 = [[f64; 3]; 3];
 
-/// CIE 1931 xy of D65 as [BT709] and [BT2020] give it.
+/// CIE 1931 xy of D65 as BT709 and BT2020 give it.
 pub const D65_XY: [f64; 2] = [0.3127, 0.3290];
-/// CIE 1931 xy of the ACES white ([S-2014-004]).
+/// CIE 1931 xy of the ACES white (S-2014-004).
 pub const ACES_WHITE_XY: [f64; 2] = [0.32168, 0.33767];
 
-/// The linear Bradford cone-response matrix (XYZ → ρ, γ, β) ([Lam85]).
+/// The linear Bradford cone-response matrix (XYZ → ρ, γ, β) (Lam85).
 pub const BRADFORD: Mat3 = [[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]];
 
 /// The colour space of a LUT's texels.
@@ -212,7 +216,7 @@ pub fn xy_to_xyz([x, y]: [f64; 2]) -> [f64; 3] {
     [x / y, 1.0, (1.0 - x - y) / y]
 }
 
-/// RGB → XYZ of primaries `p` and white `w` ([RP177]).
+/// RGB → XYZ of primaries `p` and white `w` (RP177).
 pub fn normalised_primary_matrix(p: [[f64; 2]; 3], w: [f64; 2]) -> Mat3 {
     let cols = p.map(xy_to_xyz);
     let pm: Mat3 = std::array::from_fn(|i| std::array::from_fn(|j| cols[j][i]));

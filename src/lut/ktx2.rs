@@ -24,13 +24,16 @@
 //! KTXorientation "rd", which the file states.
 //!
 //! Key/value data ([KTX2] "Key/Value Data"): `KTXorientation` = "rd", `KTXwriter` =
-//! "sky <version>", and `sky` = the caller's JSON (the manifest entry of the
+//! `sky <version>`, and `sky` = the caller's JSON (the manifest entry of the
 //! file), each value a NUL-terminated UTF-8 string, the entries sorted by
 //! the bytes of their keys as the specification requires.
 //!
-//! Data format descriptor ([KDFS] Basic block fields; the values match KTX-Software's
-//! `vk2dfd` and the `ktx2` crate's `dfd::Basic::from_format`, checked in
-//! the tests): vendor 0 (Khronos), descriptor type 0 (basic), version 2,
+//! Data format descriptor ([KDFS] Basic block fields): the descriptor
+//! KTX-Software's `vk2dfd` builds (lib/dfdutils/createdfd.c, `writeSample`:
+//! UFLOAT samples have the FLOAT qualifier, lower 0.0f and upper 1.0f;
+//! SFLOAT samples FLOAT and SIGNED, −1.0f and 1.0f), byte-equal in the tests
+//! to the `ktx2` crate's `dfd::Basic::from_format_with` for the same
+//! primaries: vendor 0 (Khronos), descriptor type 0 (basic), version 2,
 //! colour model RGBSDA (1), colour primaries from the texture's colour
 //! space (BT709 = 1, BT2020 = 4, ACEScc/AP1 = 7, CIEXYZ = 5), transfer
 //! function linear (1), flags 0 (straight alpha), texel block 1×1×1×1,
@@ -79,7 +82,7 @@ pub fn vk_format(texels: &Texels<'_>) -> u32 {
 }
 
 /// The header's typeSize: the packed word for PACK32 formats, one
-/// component otherwise ([KTX2] "typeSize").
+/// component otherwise (the KTX2 specification's "typeSize").
 pub fn type_size(texels: &Texels<'_>) -> u32 {
     match texels {
         Texels::B10G11R11(_) => 4,
@@ -119,7 +122,7 @@ pub enum Ktx2Error {
     },
 }
 
-/// "sky <version>", the `KTXwriter` value.
+/// `sky <version>`, the `KTXwriter` value.
 pub fn writer_name() -> String {
     format!("sky {}", env!("CARGO_PKG_VERSION"))
 }
