@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
+.PHONY: all build test ktx-parse demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
 
 all: build
 
@@ -15,8 +15,13 @@ build:
 	$(CARGO) build --release --locked
 
 # The whole test suite, in the release profile so dependencies build once.
-test: build
+# tests/ktx_readers.rs reads our KTX2 files with npm's ktx-parse (pinned in
+# tests/ktx_parse/package-lock.json; needs node and npm) and fails without it.
+test: build ktx-parse
 	$(CARGO) test --release --locked
+
+ktx-parse:
+	npm ci --prefix tests/ktx_parse --no-audit --no-fund
 
 # The main job on the embedded default: optical properties and plots of the
 # basis atmospheres, and a look at Mie theory.
@@ -38,7 +43,7 @@ regen-data:
 	python3 -m venv .venv-data && .venv-data/bin/pip install -q -r scripts/requirements-data.txt && .venv-data/bin/python scripts/regen_data.py
 
 regen-reference:
-	python3 -m venv .venv-ref && .venv-ref/bin/pip install -q -r scripts/requirements-reference.txt && .venv-ref/bin/python scripts/regen_reference.py
+	python3 -m venv .venv-ref && .venv-ref/bin/pip install -q -r scripts/requirements-reference.txt && .venv-ref/bin/python scripts/regen_reference.py && .venv-ref/bin/python scripts/regen_colour_spaces.py
 
 clean:
 	rm -rf $(OUT)

@@ -1,7 +1,17 @@
 //! Look-up tables for real-time engines: the talk's adaptive mappings
-//! (time slices and sky directions).
+//! (time slices and sky directions), the weather rule, the manifest and
+//! reference decoder, and the texture formats and files the tables are
+//! stored in.
 
+pub mod atomic;
+pub mod colour;
+pub mod dds;
 pub mod decode;
+pub mod ktx2;
 pub mod manifest;
 pub mod mapping;
+pub mod minifloat;
+pub mod r11g11b10;
+pub mod rgba16f;
+pub mod texels;
 pub mod weather;
