@@ -6,6 +6,7 @@
 
 pub mod cache;
 pub mod file;
+pub mod pack;
 pub mod run;
 
 pub use cache::{RenderedSlice, SliceCache};
@@ -88,6 +89,8 @@ pub enum BakeError {
     NoSuchSlice(String),
     #[error("basis sky {sky}, slice {index}, texel (u {u}, v {v}): {what} is not finite")]
     NotFinite { sky: String, index: usize, u: usize, v: usize, what: &'static str },
+    #[error("cannot write the bake: {0}")]
+    Write(String),
     #[error("bake cancelled")]
     Cancelled,
 }

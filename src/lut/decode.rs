@@ -123,6 +123,51 @@ pub fn mat_mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
 }
 
+/// Why a bake cannot be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    #[error("{}: {message}", path.display())]
+    File { path: std::path::PathBuf, message: String },
+}
+
+fn load_error(path: &std::path::Path, message: impl Into<String>) -> LoadError {
+    LoadError::File { path: path.to_path_buf(), message: message.into() }
+}
+
+impl Luts {
+    /// Loads a bake: its manifest and every texture it names, each read
+    /// with the `ktx2` crate (a reader independent of our writer) and
+    /// checked against its manifest entry.
+    pub fn load(manifest_path: &std::path::Path) -> Result<Luts, LoadError> {
+        let text = std::fs::read_to_string(manifest_path).map_err(|e| load_error(manifest_path, e.to_string()))?;
+        let manifest: Manifest = serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
+        if manifest.format != super::manifest::FORMAT || manifest.version != super::manifest::VERSION {
+            return Err(load_error(manifest_path, format!("a {} version {} manifest; this build reads {} version {}", manifest.format, manifest.version, super::manifest::FORMAT, super::manifest::VERSION)));
+        }
+        let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
+        let mut textures = Vec::new();
+        for e in &manifest.skies {
+            let path = dir.join(&e.file);
+            let bytes = std::fs::read(&path).map_err(|err| load_error(&path, err.to_string()))?;
+            let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
+            let h = r.header();
+            let format = h.format.map(|f| f.value()).unwrap_or(0);
+            if format != super::ktx2::VK_FORMAT_B10G11R11_UFLOAT_PACK32 || h.pixel_width as usize != e.width || h.pixel_height as usize != e.height || h.layer_count as usize != e.layers || e.slices.len() != e.layers {
+                return Err(load_error(&path, format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 122, {} x {} x {} layers and {} slices", h.pixel_width, h.pixel_height, h.layer_count, e.width, e.height, e.layers, e.slices.len())));
+            }
+            let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
+            let texels = e.width * e.height;
+            if level.data.len() != 4 * texels * e.layers {
+                return Err(load_error(&path, format!("level 0 holds {} bytes, not {}", level.data.len(), 4 * texels * e.layers)));
+            }
+            let words: Vec<[f32; 3]> = level.data.chunks_exact(4).map(|b| super::r11g11b10::unpack(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))).collect();
+            let layers = words.chunks(texels).map(<[[f32; 3]]>::to_vec).collect();
+            textures.push(Texture { width: e.width, height: e.height, layers });
+        }
+        Ok(Luts { manifest, textures })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,0 +1,161 @@
+//! Packing a bake: each basis sky's 64 rendered XYZ slices become one
+//! R11G11B10F 2-D array texture (KTX2, vkFormat 122) in the chosen linear
+//! RGB space, and the bake's `manifest.json` says how to read them.
+//!
+//! Scale: one power of two per slice, recorded in the manifest as
+//! `scale_log2` (stored = value · 2^scale_log2), chosen so that the slice's
+//! largest channel lands in (2^14, 2^15]. Sky luminance spans 1e-3 cd/m²
+//! (the sun 10° below the horizon) to beyond 1e5 (the aureole), more than
+//! the format's normal range (2^-14 to 65024) with room to spare at either
+//! end; per slice, the range left is the slice's own (rarely above 1e6),
+//! so nearly nothing falls into denormals and nothing clamps. A power of
+//! two changes no mantissa: scaling is exact, and the decoder undoes it per
+//! slice before it interpolates between slices.
+
+use super::run::SkySlices;
+use super::BakeError;
+use crate::lut::colour::ColourSpace;
+use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
+use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry};
+use crate::lut::mapping;
+use crate::lut::r11g11b10::{self, PackStats};
+use crate::lut::texels::Texels;
+use std::path::Path;
+
+/// The largest channel of a slice is scaled into (2^(TOP - 1), 2^TOP].
+const TOP_LOG2: i32 = 15;
+
+/// The exponent k with max · 2^k in (2^14, 2^15] (0 for a black slice).
+pub fn slice_scale_log2(max_value: f64) -> i32 {
+    if !(max_value > 0.0) || !max_value.is_finite() {
+        return 0;
+    }
+    let k = TOP_LOG2 - max_value.log2().ceil() as i32;
+    k.clamp(-60, 60)
+}
+
+/// What packing one basis sky produced.
+pub struct PackedSky {
+    pub entry: SkyEntry,
+    pub stats: PackStats,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Packs one basis sky (every slice present) into `dir/NAME.ktx2`.
+pub fn pack_sky(s: &SkySlices, colour: ColourSpace, dir: &Path) -> Result<PackedSky, BakeError> {
+    let (w, h) = (s.sky.width, s.sky.height);
+    let mut words = Vec::with_capacity(w * h * s.slices.len());
+    let mut stats = PackStats::default();
+    let mut negative = 0;
+    let mut slices = Vec::new();
+    for (index, slice) in s.slices.iter().enumerate() {
+        let slice = slice.as_ref().expect("pack_sky needs every slice");
+        let (rgb, clamp) = colour.convert_array(&slice.xyz);
+        negative += clamp.negative_texels;
+        let max = rgb.iter().flatten().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
+        let k = slice_scale_log2(max);
+        let scale = (k as f64).exp2();
+        let scaled: Vec<[f64; 3]> = rgb.iter().map(|p| p.map(|c| c * scale)).collect();
+        let (packed, st) = r11g11b10::pack_array(&scaled).map_err(|e| BakeError::NotFinite { sky: s.sky.name.clone(), index, u: e.texel % w, v: e.texel / w, what: "RGB" })?;
+        words.extend(packed);
+        stats.merge(&st);
+        let rel: Vec<f64> = slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
+        slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel), core_seconds: slice.core_seconds });
+    }
+    let file = format!("{}.ktx2", s.sky.name);
+    let mut entry = SkyEntry {
+        name: s.sky.name.clone(),
+        file: file.clone(),
+        format: "B10G11R11_UFLOAT_PACK32".into(),
+        vk_format: VK_FORMAT_B10G11R11_UFLOAT_PACK32,
+        bytes: 0,
+        width: w,
+        height: h,
+        layers: s.slices.len(),
+        atmosphere: s.atmosphere_name.clone(),
+        atmosphere_hash: s.atmosphere_hash.clone(),
+        altitude_m: s.sky.altitude_m,
+        planet_radius_km: s.radius_km,
+        top_km: s.top_km,
+        d_min_km: s.top_km,
+        d_max_km: mapping::horizontal_distance_km(s.radius_km, s.top_km),
+        threshold_sun_zenith_deg: s.threshold_deg,
+        slices,
+        texels_clamped: stats.clamped_texels,
+        texels_denormal: stats.denormal_texels,
+        texels_negative_rgb: negative,
+    };
+    // The file carries its own manifest entry (less its size, which the
+    // file cannot know), under the `sky` key.
+    let mut inner = serde_json::to_value(&entry).expect("an entry always serialises");
+    inner.as_object_mut().expect("an object").remove("bytes");
+    let sky_json = inner.to_string();
+    let tex = ArrayTexture { width: w as u32, height: h as u32, layers: s.slices.len() as u32, colour_space: colour, texels: Texels::B10G11R11(&words), sky_json: &sky_json };
+    entry.bytes = ktx2::write(&dir.join(&file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+    Ok(PackedSky { entry, stats })
+}
+
+/// The manifest of packed skies.
+pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Manifest {
+    Manifest {
+        format: manifest::FORMAT.into(),
+        version: manifest::VERSION,
+        generator: format!("sky {}", crate::VERSION),
+        quality: quality.into(),
+        units: manifest::Units {
+            luminance: "cd/m^2: Y of CIE 1931 XYZ (radiance x 683 lm/W); RGB is the colour space's linear RGB of that XYZ".into(),
+            scale: "value = stored * 2^-scale_log2, with the scale_log2 of the texel's slice; applied to each slice before slices are interpolated".into(),
+        },
+        colour: manifest::Colour {
+            space: colour.name().into(),
+            rgb_from_xyz: colour.xyz_to_rgb(),
+            xyz_from_rgb: colour.rgb_to_xyz(),
+            note: "negative RGB (XYZ outside the space's gamut) is clamped to 0 and counted per sky in texels_negative_rgb".into(),
+        },
+        time_mapping: manifest::time_mapping(),
+        direction_mapping: manifest::direction_mapping(),
+        weather: manifest::weather(),
+        skies,
+    }
+}
+
+/// Packs every basis sky into `dir` and writes `dir/manifest.json` last
+/// (each file through a temporary file and a rename).
+pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: &Path) -> Result<(Manifest, Vec<PackStats>), BakeError> {
+    std::fs::create_dir_all(dir).map_err(|e| BakeError::Write(format!("{}: {e}", dir.display())))?;
+    let mut entries = Vec::new();
+    let mut stats = Vec::new();
+    for s in skies {
+        let p = pack_sky(s, colour, dir)?;
+        entries.push(p.entry);
+        stats.push(p.stats);
+    }
+    let m = manifest(quality, colour, entries);
+    let text = serde_json::to_string_pretty(&m).expect("a manifest always serialises");
+    let path = dir.join("manifest.json");
+    crate::lut::atomic::write_atomically(&path, text.as_bytes()).map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;
+    Ok((m, stats))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slice_scales_put_the_maximum_just_below_2_to_the_15() {
+        for max in [1e-3, 0.7, 1.0, 2.0, 3.0, 32768.0, 32769.0, 1e5, 3e6] {
+            let k = slice_scale_log2(max);
+            let top = max * (k as f64).exp2();
+            assert!(top > 16384.0 && top <= 32768.0, "{max}: k {k}, top {top}");
+        }
+        assert_eq!(slice_scale_log2(0.0), 0);
+        assert_eq!(slice_scale_log2(f64::NAN), 0);
+    }
+}
