@@ -59,6 +59,13 @@ pub fn texel_index(width: u32, height: u32, layer: u32, x: u32, y: u32) -> usize
     ((layer as usize * height as usize) + y as usize) * width as usize + x as usize
 }
 
+/// The inverse of [`texel_index`]: (layer, x, y) of texel number `index`,
+/// e.g. to name the slice and texel of a value that cannot be packed.
+pub fn texel_position(width: u32, height: u32, index: usize) -> (u32, u32, u32) {
+    let (w, h) = (width as usize, height as usize);
+    ((index / (w * h)) as u32, (index % w) as u32, ((index / w) % h) as u32)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -70,6 +77,9 @@ mod tests {
         assert_eq!(texel_index(32, 128, 0, 0, 1), 32);
         assert_eq!(texel_index(32, 128, 1, 0, 0), 32 * 128);
         assert_eq!(texel_index(32, 128, 63, 31, 127), 32 * 128 * 64 - 1);
+        for (l, x, y) in [(0, 0, 0), (0, 31, 0), (1, 0, 0), (5, 7, 99), (63, 31, 127)] {
+            assert_eq!(texel_position(32, 128, texel_index(32, 128, l, x, y)), (l, x, y));
+        }
         let mut b = Vec::new();
         Texels::B10G11R11(&[0x0403_0201]).write_le(&mut b);
         Texels::Rgba16f(&[[0x0201, 0x0403, 0x0605, 0x0807]]).write_le(&mut b);
