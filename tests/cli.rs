@@ -270,7 +270,7 @@ fn ctrl_c_stops_a_render_and_writes_nothing() {
     assert!(!out.exists());
     // The journal stays, for --resume.
     assert!(c.path().join("big.exr.journal").exists());
-    let leftovers: Vec<_> = std::fs::read_dir(c.path()).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().starts_with(".tmp")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(c.path()).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().starts_with(".sky-tmp")).collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 

@@ -8,6 +8,7 @@ use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use sky::bake::{self, BakeEvent, BakeFile, BakeOptions, BakeSink, Quality, SliceCache, SliceId};
 use sky::farm::coordinator::{Options, WorkerSpec};
+use sky::lut::colour::ColourSpace;
 use sky::mie::MieCache;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +30,9 @@ pub struct BakeArgs {
     /// Quality preset of the bake file
     #[arg(long, value_enum, default_value = "draft")]
     quality: QualityArg,
+    /// Linear RGB space of the textures (the manifest records its matrix)
+    #[arg(long, value_enum, default_value = "rec709")]
+    colour_space: ColourSpace,
     /// The slice cache (default: OUT/cache)
     #[arg(long, value_name = "DIR")]
     cache: Option<PathBuf>,
@@ -180,6 +184,43 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     };
     let rendered: usize = skies.iter().map(|s| s.rendered).sum();
     let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum();
-    eprintln!("sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.2} core-hours when rendered", started.elapsed().as_secs_f64(), core_s / 3600.0);
+    eprintln!("sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.3} core-hours when rendered", started.elapsed().as_secs_f64(), core_s / 3600.0);
+    if !a.slice.is_empty() {
+        // A part of a bake (a farm manager's task) fills the cache only.
+        if a.json {
+            outln!("{}", serde_json::json!({ "slices": a.slice.iter().map(|s| s.to_string()).collect::<Vec<_>>(), "rendered": rendered, "cache": opts.cache.dir() }));
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let (manifest, stats) = match bake::pack::write_bake(&skies, quality.name(), a.colour_space, &a.out) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("sky bake-luts: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
+    for (e, st) in manifest.skies.iter().zip(&stats) {
+        eprintln!("sky bake-luts: {:<8} {} ({} bytes, {}x{}x{}), {} texels clamped, {} denormal, {} with negative RGB", e.name, e.file, e.bytes, e.width, e.height, e.layers, st.clamped_texels, st.denormal_texels, e.texels_negative_rgb);
+    }
+    eprintln!("sky bake-luts: {} files, {:.2} MiB, and {}", manifest.skies.len(), total_bytes as f64 / 1048576.0, a.out.join("manifest.json").display());
+    if a.json {
+        let skies_json: Vec<_> = manifest
+            .skies
+            .iter()
+            .zip(&skies)
+            .zip(&stats)
+            .map(|((e, s), st)| {
+                let cost: Vec<f64> = e.slices.iter().map(|x| x.core_seconds).collect();
+                serde_json::json!({
+                    "name": e.name, "file": e.file, "bytes": e.bytes, "width": e.width, "height": e.height, "layers": e.layers,
+                    "slices_rendered": s.rendered, "slices_cached": s.cached,
+                    "core_seconds": cost.iter().sum::<f64>(), "core_seconds_per_slice": cost,
+                    "texels_clamped": st.clamped_texels, "texels_denormal": st.denormal_texels, "texels_underflow": st.underflow_texels, "texels_negative_rgb": e.texels_negative_rgb,
+                })
+            })
+            .collect();
+        outln!("{}", serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "errors": [] }));
+    }
     Ok(ExitCode::SUCCESS)
 }

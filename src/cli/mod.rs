@@ -17,6 +17,7 @@ mod atmosphere;
 mod bake;
 mod bench;
 mod farm_args;
+mod lut;
 mod mie;
 mod progress;
 mod render;
@@ -53,6 +54,9 @@ enum Command {
     Worker(worker::WorkerArgs),
     /// Bake the talk's basis-sky LUTs (R11G11B10F texture arrays and a manifest)
     BakeLuts(bake::BakeArgs),
+    /// Read a bake's LUTs as a runtime does: sample a direction, decode a whole sky
+    #[command(subcommand)]
+    Lut(lut::LutCommand),
     /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
     Preview(NotYet),
     /// Validate and inspect atmosphere files (TOML; a file without a [sun]
@@ -107,6 +111,7 @@ pub fn main() -> ExitCode {
         Command::Render(a) => render::run(a),
         Command::Worker(a) => worker::run(a),
         Command::BakeLuts(a) => bake::run(a),
+        Command::Lut(c) => lut::run(c),
         Command::Preview(_) => not_yet("preview", None),
         Command::Atmosphere(c) => atmosphere::run(c),
         Command::Mie(a) => mie::run(a),

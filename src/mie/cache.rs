@@ -75,16 +75,11 @@ impl MieCache {
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same directory
-/// and a rename, creating the directory if needed.
+/// and a rename ([`crate::lut::atomic::write_atomically`]), creating the
+/// directory if needed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    use std::io::Write;
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)?;
-    tmp.write_all(bytes)?;
-    tmp.as_file().sync_all()?;
-    tmp.persist(path).map_err(|e| e.error)?;
-    Ok(())
+    std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
+    crate::lut::atomic::write_atomically(path, bytes)
 }
 
 #[cfg(test)]
