@@ -11,6 +11,10 @@
 //! so nearly nothing falls into denormals and nothing clamps. A power of
 //! two changes no mantissa: scaling is exact, and the decoder undoes it per
 //! slice before it interpolates between slices.
+//!
+//! The files depend only on the rendered texels (never on timings or
+//! paths), so a bake from the cache, a resumed bake and a fresh one write
+//! the same bytes.
 
 use super::run::SkySlices;
 use super::BakeError;
@@ -67,7 +71,7 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace, dir: &Path) -> Result<Packed
         words.extend(packed);
         stats.merge(&st);
         let rel: Vec<f64> = slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
-        slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel), core_seconds: slice.core_seconds });
+        slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel) });
     }
     let file = format!("{}.ktx2", s.sky.name);
     let mut entry = SkyEntry {

@@ -201,7 +201,10 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     };
     let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
     for (e, st) in manifest.skies.iter().zip(&stats) {
-        eprintln!("sky bake-luts: {:<8} {} ({} bytes, {}x{}x{}), {} texels clamped, {} denormal, {} with negative RGB", e.name, e.file, e.bytes, e.width, e.height, e.layers, st.clamped_texels, st.denormal_texels, e.texels_negative_rgb);
+        eprintln!(
+            "sky bake-luts: {:<8} {} ({} bytes, {}x{}x{}), {} texels clamped, {} denormal, {} with negative RGB",
+            e.name, e.file, e.bytes, e.width, e.height, e.layers, st.clamped_texels, st.denormal_texels, e.texels_negative_rgb
+        );
     }
     eprintln!("sky bake-luts: {} files, {:.2} MiB, and {}", manifest.skies.len(), total_bytes as f64 / 1048576.0, a.out.join("manifest.json").display());
     if a.json {
@@ -211,7 +214,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             .zip(&skies)
             .zip(&stats)
             .map(|((e, s), st)| {
-                let cost: Vec<f64> = e.slices.iter().map(|x| x.core_seconds).collect();
+                let cost: Vec<f64> = s.slices.iter().flatten().map(|x| x.core_seconds).collect();
                 serde_json::json!({
                     "name": e.name, "file": e.file, "bytes": e.bytes, "width": e.width, "height": e.height, "layers": e.layers,
                     "slices_rendered": s.rendered, "slices_cached": s.cached,
@@ -220,7 +223,10 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
                 })
             })
             .collect();
-        outln!("{}", serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "errors": [] }));
+        outln!(
+            "{}",
+            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "errors": [] })
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -142,7 +142,10 @@ impl Luts {
         let text = std::fs::read_to_string(manifest_path).map_err(|e| load_error(manifest_path, e.to_string()))?;
         let manifest: Manifest = serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
         if manifest.format != super::manifest::FORMAT || manifest.version != super::manifest::VERSION {
-            return Err(load_error(manifest_path, format!("a {} version {} manifest; this build reads {} version {}", manifest.format, manifest.version, super::manifest::FORMAT, super::manifest::VERSION)));
+            return Err(load_error(
+                manifest_path,
+                format!("a {} version {} manifest; this build reads {} version {}", manifest.format, manifest.version, super::manifest::FORMAT, super::manifest::VERSION),
+            ));
         }
         let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
         let mut textures = Vec::new();
@@ -152,8 +155,25 @@ impl Luts {
             let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
             let h = r.header();
             let format = h.format.map(|f| f.value()).unwrap_or(0);
-            if format != super::ktx2::VK_FORMAT_B10G11R11_UFLOAT_PACK32 || h.pixel_width as usize != e.width || h.pixel_height as usize != e.height || h.layer_count as usize != e.layers || e.slices.len() != e.layers {
-                return Err(load_error(&path, format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 122, {} x {} x {} layers and {} slices", h.pixel_width, h.pixel_height, h.layer_count, e.width, e.height, e.layers, e.slices.len())));
+            if format != super::ktx2::VK_FORMAT_B10G11R11_UFLOAT_PACK32
+                || h.pixel_width as usize != e.width
+                || h.pixel_height as usize != e.height
+                || h.layer_count as usize != e.layers
+                || e.slices.len() != e.layers
+            {
+                return Err(load_error(
+                    &path,
+                    format!(
+                        "vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 122, {} x {} x {} layers and {} slices",
+                        h.pixel_width,
+                        h.pixel_height,
+                        h.layer_count,
+                        e.width,
+                        e.height,
+                        e.layers,
+                        e.slices.len()
+                    ),
+                ));
             }
             let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
             let texels = e.width * e.height;
@@ -198,7 +218,7 @@ mod tests {
                 sky(d, sun).map(|v| (v * (scale_log2 as f64).exp2()) as f32)
             });
             layers.push(layer.collect());
-            slices.push(SliceEntry { index: i, sun_zenith_deg: z, scale_log2, mean_samples: 1.0, median_rel_stderr_y: 0.0, core_seconds: 0.0 });
+            slices.push(SliceEntry { index: i, sun_zenith_deg: z, scale_log2, mean_samples: 1.0, median_rel_stderr_y: 0.0 });
         }
         let entry = SkyEntry {
             name: "clear".into(),

@@ -124,7 +124,6 @@ pub struct SliceEntry {
     pub mean_samples: f64,
     /// Median over the slice of the standard error of Y over Y.
     pub median_rel_stderr_y: f64,
-    pub core_seconds: f64,
 }
 
 /// The manifest's fixed descriptions, shared by the writer and the docs.

@@ -1,0 +1,172 @@
+//! `sky bake-luts` end to end on a tiny bake (tests/bakes/tiny.toml: two
+//! basis skies on the plane-parallel validation atmospheres, 4 x 16 texels,
+//! 64 slices, 2 samples): files, manifest, the reference decoder, the
+//! content-addressed cache (a re-run renders nothing, a changed atmosphere
+//! re-renders only its slices, a killed bake resumes) and located errors.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn sky(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(dir).env("SKY_CACHE_DIR", "off").output().unwrap()
+}
+
+fn summary(o: &Output) -> serde_json::Value {
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stdout)))
+}
+
+fn rendered(s: &serde_json::Value) -> Vec<(String, u64, u64)> {
+    s["skies"].as_array().unwrap().iter().map(|k| (k["name"].as_str().unwrap().to_string(), k["slices_rendered"].as_u64().unwrap(), k["slices_cached"].as_u64().unwrap())).collect()
+}
+
+/// The tiny bake and the atmospheres it reads, copied into `dir` with the
+/// same layout (so that an atmosphere can be changed).
+fn copy_tree(dir: &Path) -> PathBuf {
+    let copy = |from: &str| {
+        let src = root().join(from);
+        for e in std::fs::read_dir(&src).unwrap() {
+            let e = e.unwrap();
+            if e.file_type().unwrap().is_file() {
+                let to = dir.join(from).join(e.file_name());
+                std::fs::create_dir_all(to.parent().unwrap()).unwrap();
+                std::fs::copy(e.path(), to).unwrap();
+            }
+        }
+    };
+    for d in ["tests/bakes", "tests/atmospheres", "tests/atmospheres/data", "atmospheres/data"] {
+        copy(d);
+    }
+    dir.join("tests/bakes/tiny.toml")
+}
+
+#[test]
+fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("luts");
+    let bake = root().join("tests/bakes/tiny.toml");
+    let args = ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
+    let first = summary(&sky(&args, tmp.path()));
+    assert_eq!(rendered(&first), [("clear".to_string(), 64, 0), ("hazed".to_string(), 64, 0)]);
+    // Two arrays of 4 x 16 x 64 words, and the manifest.
+    for name in ["clear", "hazed"] {
+        let bytes = std::fs::metadata(out.join(format!("{name}.ktx2"))).unwrap().len();
+        assert!(bytes > 4 * 16 * 64 * 4 && bytes < 4 * 16 * 64 * 4 + 32768, "{name}: {bytes} bytes");
+    }
+    let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
+    assert_eq!(luts.manifest.skies.len(), 2);
+    assert_eq!(luts.manifest.colour.space, "rec709");
+    for e in &luts.manifest.skies {
+        assert_eq!((e.width, e.height, e.layers, e.slices.len(), e.vk_format), (4, 16, 64, 64, 122));
+        assert_eq!(e.texels_clamped, 0, "{}", e.name);
+    }
+    // A sun above the horizon lights the sky; the decoder reads it.
+    let d = sky::render::camera::direction_deg(50.0, 120.0);
+    let y = luts.sample_xyz(30.0, 0.0, 0.5, 0.0, d)[1];
+    assert!(y > 0.0 && y.is_finite(), "{y}");
+    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+
+    // Nothing changed: nothing is rendered, and the files are the same bytes.
+    let second = summary(&sky(&args, tmp.path()));
+    assert_eq!(rendered(&second), [("clear".to_string(), 0, 64), ("hazed".to_string(), 0, 64)]);
+    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    assert!(before == after, "a re-run from the cache changed the files");
+
+    // The decoder on the command line.
+    let m = out.join("manifest.json");
+    let exr = tmp.path().join("sky.exr");
+    let png = tmp.path().join("sky.png");
+    let o = sky(&["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "20", "--size", "32x32", "--out", exr.to_str().unwrap(), "--png", png.to_str().unwrap()], tmp.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(exr.exists() && png.exists());
+    let o = sky(&["lut", "sample", m.to_str().unwrap(), "--sun-elevation-deg", "30", "--haziness", "0.5", "--direction", "50,120", "--json"], tmp.path());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!((v["xyz"][1].as_f64().unwrap() / y - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn changing_one_atmosphere_rerenders_only_its_slices() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = copy_tree(tmp.path());
+    let out = tmp.path().join("luts");
+    let args = ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
+    summary(&sky(&args, tmp.path()));
+    // The atmosphere's content hash covers its text: one more line changes it.
+    let hazed = tmp.path().join("tests/atmospheres/disort_rayleigh_hg.toml");
+    let mut text = std::fs::read_to_string(&hazed).unwrap();
+    text.push_str("\n# changed\n");
+    std::fs::write(&hazed, text).unwrap();
+    let again = summary(&sky(&args, tmp.path()));
+    assert_eq!(rendered(&again), [("clear".to_string(), 0, 64), ("hazed".to_string(), 64, 0)]);
+}
+
+#[test]
+fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let out = tmp.path().join("killed");
+    let cache = out.join("cache");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .env("SKY_CACHE_DIR", "off")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let slices = |d: &Path| std::fs::read_dir(d).map(|r| r.filter(|e| e.as_ref().unwrap().path().extension().is_some_and(|x| x == "slice")).count()).unwrap_or(0);
+    // SIGKILL once a few slices are in the cache (no chance to clean up).
+    let mut waited = 0;
+    while slices(&cache) < 10 && waited < 6000 {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+        waited += 1;
+    }
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let done = slices(&cache);
+    assert!((10..128).contains(&done), "{done} slices cached when the bake was killed");
+    assert!(!out.join("manifest.json").exists());
+    let resumed = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let total: u64 = rendered(&resumed).iter().map(|r| r.1).sum();
+    assert_eq!(total, 128 - done as u64, "{resumed}");
+    // The same bytes as a bake that was never interrupted.
+    let fresh = tmp.path().join("fresh");
+    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"], tmp.path()));
+    for f in ["clear.ktx2", "hazed.ktx2"] {
+        assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(), "{f} differs after a resumed bake");
+    }
+}
+
+#[test]
+fn a_slice_goes_only_into_the_cache() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let out = tmp.path().join("luts");
+    let s = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:5,hazed:63", "--json"], tmp.path()));
+    assert_eq!(s["rendered"], 2);
+    assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 2);
+    assert!(!out.join("manifest.json").exists());
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--slice cloudy3:1: no such basis sky or slice"), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:64"], tmp.path());
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn bad_bake_files_are_located_errors() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bad = tmp.path().join("bad.toml");
+    std::fs::write(&bad, "[[sky]]\nname = \"clear\"\natmosphere = \"missing.toml\"\nwidth = 32\nheight = 128\n").unwrap();
+    let o = sky(&["bake-luts", bad.to_str().unwrap(), "--out", tmp.path().join("o").to_str().unwrap()], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("bad.toml:3: sky \"clear\": atmosphere file") && err.contains("not found"), "{err}");
+    let o = sky(&["lut", "sample", tmp.path().join("none.json").to_str().unwrap(), "--sun-elevation-deg", "10", "--direction", "10,10"], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    let o = sky(&["lut", "sample", tmp.path().join("none.json").to_str().unwrap(), "--sun-elevation-deg", "10", "--haziness", "2", "--direction", "10,10"], tmp.path());
+    assert_eq!(o.status.code(), Some(2));
+}
