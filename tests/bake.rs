@@ -170,3 +170,35 @@ fn bad_bake_files_are_located_errors() {
     let o = sky(&["lut", "sample", tmp.path().join("none.json").to_str().unwrap(), "--sun-elevation-deg", "10", "--haziness", "2", "--direction", "10,10"], tmp.path());
     assert_eq!(o.status.code(), Some(2));
 }
+
+#[test]
+fn lut_verify_reports_every_elevation() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let out = tmp.path().join("luts");
+    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let m = out.join("manifest.json");
+    let plots = tmp.path().join("plots");
+    let o = sky(&["lut", "verify", m.to_str().unwrap(), "--bake", bake.to_str().unwrap(), "--directions", "40", "--spp", "4", "--plot", plots.to_str().unwrap(), "--json"], tmp.path());
+    let v = summary(&o);
+    let skies = v["skies"].as_array().unwrap();
+    assert_eq!(skies.len(), 2);
+    for s in skies {
+        let e = s["elevations"].as_array().unwrap();
+        assert_eq!(e.len(), 13, "{s}");
+        // Above the horizon the references are lit and every figure is a number.
+        let day: Vec<&serde_json::Value> = e.iter().filter(|x| x["sun_elevation_deg"].as_f64().unwrap() > 1.0).collect();
+        assert!(!day.is_empty());
+        for x in day {
+            for k in ["median_rel_y", "p99_rel_y", "median_de2000", "psnr_db"] {
+                assert!(x[k].as_f64().is_some_and(f64::is_finite), "{k}: {x}");
+            }
+        }
+        // The cache is next to the manifest: the quantisation error is measured,
+        // and R11G11B10F rounds a texel by at most half a step of B's five
+        // mantissa bits (2^-6 of the channel, so of the largest channel).
+        let q = s["quantisation_p99_rel"].as_f64().unwrap();
+        assert!(q > 0.0 && q <= 1.0 / 64.0, "{q}");
+    }
+    assert!(plots.join("twilight_clear.png").exists());
+}

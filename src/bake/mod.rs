@@ -8,6 +8,7 @@ pub mod cache;
 pub mod file;
 pub mod pack;
 pub mod run;
+pub mod verify;
 
 pub use cache::{RenderedSlice, SliceCache};
 pub use file::{BakeFile, BakeFileError, BasisSky, Quality, Sampling};

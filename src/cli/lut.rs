@@ -18,6 +18,35 @@ pub enum LutCommand {
     /// A whole sky decoded from the LUTs, to OpenEXR (XYZ) and PNG
     #[command(after_help = "Example:\n  sky lut decode luts/manifest.json --sun-elevation-deg 12 --camera fisheye --size 256x256 --out sky.exr --png sky.png")]
     Decode(DecodeArgs),
+    /// The decoder against direct renders: luminance and colour error, PSNR, the error's sources, the twilight curve
+    #[command(
+        after_help = "Example:\n  sky lut verify luts/manifest.json --bake bakes/basis-skies.toml --plot luts/verify\n\nRenders references at the sun elevations between slices 41.7, 23.3, 8.2, 3.1, 0.4, -2.7, -7.5 degrees and at six slice centres, over a lattice of directions above the horizon."
+    )]
+    Verify(VerifyArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct VerifyArgs {
+    /// The bake's manifest.json
+    manifest: PathBuf,
+    /// The bake file it was baked from (for the atmospheres)
+    #[arg(long, value_name = "BAKE.toml")]
+    bake: PathBuf,
+    /// The bake's slice cache, for the quantisation error (default: next to the manifest)
+    #[arg(long, value_name = "DIR")]
+    cache: Option<PathBuf>,
+    /// Directions of the lattice above the horizon
+    #[arg(long, default_value_t = 400)]
+    directions: usize,
+    /// Samples per reference direction
+    #[arg(long, default_value_t = 256)]
+    spp: u32,
+    /// Twilight curves (PNG, one per basis sky) into this folder
+    #[arg(long, value_name = "DIR")]
+    plot: Option<PathBuf>,
+    /// Print JSON
+    #[arg(long)]
+    json: bool,
 }
 
 /// The weather and the sun, as a runtime gives them.
@@ -152,6 +181,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        LutCommand::Verify(a) => verify(a),
         LutCommand::Decode(a) => {
             check(&a.conditions)?;
             if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {
@@ -190,4 +220,109 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+fn verify(a: VerifyArgs) -> Result<ExitCode> {
+    use sky::bake::verify::{largest_log_step, reference_twilight_step, twilight_curve, verify, VerifyOptions};
+    if a.directions == 0 || a.spp == 0 {
+        return usage("--directions and --spp must be at least 1");
+    }
+    let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    let bake = match sky::bake::BakeFile::load(&a.bake) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("{e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let cache_dir = a.cache.clone().unwrap_or_else(|| a.manifest.parent().unwrap_or(std::path::Path::new(".")).join("cache"));
+    let cache = cache_dir.is_dir().then(|| sky::bake::SliceCache::open(&cache_dir).ok()).flatten();
+    let mie = sky::mie::MieCache::from_env();
+    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let opts = VerifyOptions { directions: a.directions, spp: a.spp, ..VerifyOptions::default() };
+    eprintln!("sky lut verify: rendering references ({} directions, {} spp) at 13 sun elevations per basis sky", a.directions, a.spp);
+    let optics = sky::session::OpticsCache::default();
+    let report = match verify(&luts, &bake, cache.as_ref(), &opts, &optics, &mie, cancel.clone()) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("sky lut verify: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let quality = if luts.manifest.quality == "final" { sky::bake::Quality::Final } else { sky::bake::Quality::Draft };
+    let mut twilight = Vec::new();
+    for (e, t) in luts.manifest.skies.iter().zip(&luts.textures) {
+        if !bake.skies.iter().any(|s| s.name == e.name) {
+            continue;
+        }
+        let curve = twilight_curve(&luts, e, t);
+        let decoded = largest_log_step(&curve);
+        let reference = match reference_twilight_step(&bake, &e.name, quality, a.spp, &optics, &mie, Vec::new(), cancel.clone()) {
+            Ok(r) => r,
+            Err(err) => {
+                eprintln!("sky lut verify: {err}");
+                return Ok(ExitCode::from(EXIT_INVALID));
+            }
+        };
+        if let Some(dir) = &a.plot {
+            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            let series: Vec<sky::plot::Series> = ["zenith", "horizon toward the sun", "horizon away from the sun"]
+                .iter()
+                .enumerate()
+                .map(|(c, label)| sky::plot::Series::new(*label, curve.iter().map(|p| (p[0], p[c + 1])).collect(), c))
+                .collect();
+            let axes = sky::plot::Axes {
+                title: &format!("{}: decoded twilight luminance", e.name),
+                x_label: "sun elevation (deg)",
+                y_label: "Y (cd/m^2)",
+                x_scale: sky::plot::Scale::Linear,
+                y_scale: sky::plot::Scale::Log,
+            };
+            let path = dir.join(format!("twilight_{}.png", e.name));
+            sky::plot::line_plot(&path, &axes, &series).map_err(anyhow::Error::msg)?;
+        }
+        twilight.push(serde_json::json!({ "sky": e.name, "largest_log_step_per_0_1_deg": decoded, "reference_largest_log_step_per_0_1_deg": reference, "curve": curve }));
+    }
+    if a.json {
+        outln!("{}", serde_json::json!({ "skies": report, "twilight": twilight }));
+        return Ok(ExitCode::SUCCESS);
+    }
+    for s in &report {
+        outln!(
+            "{}: bake noise (median rel. stderr of Y) {:.2} %, quantisation median {} p99 {}",
+            s.sky,
+            100.0 * s.bake_median_rel_stderr_y,
+            pct(s.quantisation_median_rel),
+            pct(s.quantisation_p99_rel)
+        );
+        outln!("  {:>9} {:>7} {:>9} {:>9} {:>10} {:>10} {:>8} {:>8} {:>7} {:>9}", "sun_elev", "where", "median_Y", "p99_Y", "aureole_m", "aureole_99", "dE00_m", "dE00_99", "PSNR", "ref_noise");
+        for e in &s.elevations {
+            outln!(
+                "  {:>9.2} {:>7} {:>8.2}% {:>8.2}% {:>10} {:>10} {:>8.2} {:>8.2} {:>6.1}dB {:>8.2}%",
+                e.sun_elevation_deg,
+                if e.slice_centre { "slice" } else { "between" },
+                100.0 * e.median_rel_y,
+                100.0 * e.p99_rel_y,
+                pct(e.aureole_median_rel_y),
+                pct(e.aureole_p99_rel_y),
+                e.median_de2000,
+                e.p99_de2000,
+                e.psnr_db,
+                100.0 * e.reference_median_rel_stderr_y
+            );
+        }
+    }
+    for t in &twilight {
+        outln!(
+            "{} twilight: largest step of log Y per 0.1 deg decoded {:.4}, the atmosphere's own {:.4}",
+            t["sky"].as_str().unwrap_or(""),
+            t["largest_log_step_per_0_1_deg"].as_f64().unwrap_or(f64::NAN),
+            t["reference_largest_log_step_per_0_1_deg"].as_f64().unwrap_or(f64::NAN)
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn pct(v: Option<f64>) -> String {
+    v.map_or("n/a".to_string(), |x| format!("{:.2}%", 100.0 * x))
 }

@@ -113,6 +113,12 @@ impl Luts {
         out
     }
 
+    /// One basis sky alone, as CIE XYZ, for a sun at `sun_elevation_deg`
+    /// and azimuth 0.
+    pub fn sample_xyz_of(&self, entry: &SkyEntry, texture: &Texture, sun_elevation_deg: f64, dir: DVec3) -> [f64; 3] {
+        mat_mul(&self.manifest.colour.xyz_from_rgb, sample_sky(entry, texture, 90.0 - sun_elevation_deg, 0.0, dir))
+    }
+
     /// [`Luts::sample`] as CIE XYZ (Y in cd/m²).
     pub fn sample_xyz(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3) -> [f64; 3] {
         mat_mul(&self.manifest.colour.xyz_from_rgb, self.sample(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, dir))

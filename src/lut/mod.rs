@@ -5,6 +5,7 @@
 
 pub mod atomic;
 pub mod colour;
+pub mod colour_error;
 pub mod dds;
 pub mod decode;
 pub mod ktx2;

@@ -1,0 +1,328 @@
+//! `sky lut verify`: the reference decoder against direct renders of the
+//! same atmospheres, at sun elevations between slices and at slice
+//! centres, and the error split into its sources.
+//!
+//! - Directions: a Fibonacci lattice over the sky above the horizon
+//!   (elevation 0.5° to 90°), in the frame with the sun at azimuth 0; the
+//!   sun disk is hidden in the bake and the reference alike, and
+//!   directions within 5° of the sun (the aureole) are reported apart.
+//! - Luminance error: |Y_decoded − Y_reference| / Y_reference, median and
+//!   99th percentile.
+//! - Colour error: CIEDE2000 (Sharma, Wu and Dalal 2005) between the two
+//!   in CIELAB, both scaled by the same white: D65 chromaticity at the
+//!   reference's 99th-percentile luminance (a sky has no diffuse white;
+//!   this one makes the brightest part of the sky L* ≈ 100).
+//! - PSNR: 10 log10(peak² / mean squared error of Y), peak the reference's
+//!   largest Y, over the directions outside the aureole (the measure of
+//!   Bruneton 2017's comparison of his precomputed model to its reference).
+//! - Sources: Monte Carlo noise is the bake's own median relative standard
+//!   error of Y per texel (from the manifest) and the reference's;
+//!   quantisation is R11G11B10F rounding, measured on the cached slices
+//!   (stored texel against rendered value, the largest channel error over
+//!   the texel's largest channel, over the texels in the normal range); direction interpolation is the
+//!   error at slice centres; slice interpolation what the between-slice
+//!   elevations add to it.
+
+use super::cache::SliceCache;
+use super::file::BakeFile;
+use super::run::spectral_settings;
+use super::BakeError;
+use crate::atmosphere::Atmosphere;
+use crate::farm::coordinator::{Options, WorkerSpec};
+use crate::lut::colour::ColourSpace;
+use crate::lut::decode::Luts;
+use crate::lut::{colour_error, mapping};
+use crate::mie::MieCache;
+use crate::render::camera::{direction_deg, Camera};
+use crate::render::tracer::Estimator;
+use crate::render::View;
+use crate::session::{OpticsCache, Session};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// The elevations between slices, degrees.
+pub const BETWEEN_SLICES_DEG: [f64; 7] = [41.7, 23.3, 8.2, 3.1, 0.4, -2.7, -7.5];
+
+/// The seed of reference renders (not the bake's: independent noise).
+pub const REFERENCE_SEED: u64 = 0x0ef0_5eed;
+
+#[derive(Debug, Clone)]
+pub struct VerifyOptions {
+    /// Directions of the lattice above the horizon.
+    pub directions: usize,
+    /// Samples per reference direction.
+    pub spp: u32,
+    /// Slice-centre elevations are taken from these slice indices.
+    pub centre_slices: Vec<usize>,
+    pub workers: Vec<WorkerSpec>,
+}
+
+impl Default for VerifyOptions {
+    fn default() -> VerifyOptions {
+        VerifyOptions { directions: 400, spp: 256, centre_slices: vec![10, 30, 44, 47, 52, 60], workers: Vec::new() }
+    }
+}
+
+/// The error at one sun elevation.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ElevationError {
+    pub sun_elevation_deg: f64,
+    /// True at a slice centre (direction interpolation only).
+    pub slice_centre: bool,
+    pub median_rel_y: f64,
+    pub p99_rel_y: f64,
+    pub aureole_median_rel_y: Option<f64>,
+    pub aureole_p99_rel_y: Option<f64>,
+    pub median_de2000: f64,
+    pub p99_de2000: f64,
+    pub psnr_db: f64,
+    /// The reference's own median relative standard error of Y.
+    pub reference_median_rel_stderr_y: f64,
+}
+
+/// One basis sky's verification.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SkyVerification {
+    pub sky: String,
+    pub elevations: Vec<ElevationError>,
+    /// The bake's median relative standard error of Y per texel (median over slices).
+    pub bake_median_rel_stderr_y: f64,
+    /// R11G11B10F rounding: median and 99th percentile of the stored
+    /// texels' largest channel error against the rendered ones, over the
+    /// texel's largest channel (None without the cache).
+    pub quantisation_median_rel: Option<f64>,
+    pub quantisation_p99_rel: Option<f64>,
+}
+
+fn percentile(v: &mut [f64], p: f64) -> f64 {
+    if v.is_empty() {
+        return f64::NAN;
+    }
+    v.sort_by(f64::total_cmp);
+    v[((v.len() - 1) as f64 * p).round() as usize]
+}
+
+/// A Fibonacci lattice of `n` directions above the horizon: (zenith,
+/// azimuth) in degrees, elevation from 0.5° up, even in solid angle.
+pub fn sky_lattice(n: usize) -> Vec<(f64, f64)> {
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let mu_min = libm::sin(0.5f64.to_radians());
+    (0..n)
+        .map(|i| {
+            let mu = mu_min + (1.0 - mu_min) * (i as f64 + 0.5) / n as f64;
+            let az = (i as f64 * golden).to_degrees().rem_euclid(360.0);
+            (libm::acos(mu).to_degrees(), az)
+        })
+        .collect()
+}
+
+/// Verifies every basis sky of `luts` that `bake` names (the bake file
+/// gives the atmospheres and the quality's spectral settings).
+pub fn verify(
+    luts: &Luts,
+    bake: &BakeFile,
+    cache: Option<&SliceCache>,
+    opts: &VerifyOptions,
+    optics: &OpticsCache,
+    mie: &MieCache,
+    cancel: Arc<AtomicBool>,
+) -> Result<Vec<SkyVerification>, BakeError> {
+    let quality = if luts.manifest.quality == "final" { super::Quality::Final } else { super::Quality::Draft };
+    let dirs = sky_lattice(opts.directions);
+    let mut out = Vec::new();
+    for (entry, texture) in luts.manifest.skies.iter().zip(&luts.textures) {
+        let Some(sky) = bake.skies.iter().find(|s| s.name == entry.name) else { continue };
+        let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
+        let sampling = sky.sampling(quality).clone();
+        let spectral = spectral_settings(&sampling);
+        let session = Session::new(atm, bundle, spectral.clone(), optics, mie, opts.workers.clone(), Options::default(), &|| {});
+        let mut elevations: Vec<(f64, bool)> = BETWEEN_SLICES_DEG.iter().map(|&e| (e, false)).collect();
+        for &i in &opts.centre_slices {
+            elevations.push((90.0 - mapping::slice_sun_zenith_deg(i, entry.planet_radius_km, entry.top_km), true));
+        }
+        let mut errors = Vec::new();
+        for (elev, centre) in elevations {
+            let view = View {
+                camera: Camera::Directions(dirs.clone()),
+                width: dirs.len(),
+                height: 1,
+                sun_zenith_deg: 90.0 - elev,
+                sun_azimuth_deg: 0.0,
+                altitude_m: sky.altitude_m,
+                spp: opts.spp,
+                seed: REFERENCE_SEED,
+                estimator: Estimator::Full,
+                sun_disk: false,
+                max_rel_error: None,
+            };
+            let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
+            let sun = direction_deg(90.0 - elev, 0.0);
+            let reference: Vec<[f64; 3]> = r.image.pixels.iter().map(|p| p.xyz).collect();
+            let decoded: Vec<[f64; 3]> = dirs.iter().map(|&(z, a)| luts.sample_xyz_of(entry, texture, elev, direction_deg(z, a))).collect();
+            let white_y = {
+                let mut y: Vec<f64> = reference.iter().map(|x| x[1]).collect();
+                percentile(&mut y, 0.99).max(1e-30)
+            };
+            let (mut rel, mut aureole, mut de) = (Vec::new(), Vec::new(), Vec::new());
+            let (mut se, mut peak) = (0.0, 0.0f64);
+            for (k, &(z, a)) in dirs.iter().enumerate() {
+                let (d, x) = (decoded[k], reference[k]);
+                if !(x[1] > 0.0) {
+                    continue;
+                }
+                let e = (d[1] - x[1]).abs() / x[1];
+                let near_sun = direction_deg(z, a).dot(sun) > libm::cos(5f64.to_radians());
+                if near_sun {
+                    aureole.push(e);
+                    continue;
+                }
+                rel.push(e);
+                de.push(colour_error::delta_e2000(colour_error::lab(x, white_y), colour_error::lab(d, white_y)));
+                se += (d[1] - x[1]) * (d[1] - x[1]);
+                peak = peak.max(x[1]);
+            }
+            let n = rel.len().max(1) as f64;
+            let mut ref_rel: Vec<f64> = r.image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
+            errors.push(ElevationError {
+                sun_elevation_deg: elev,
+                slice_centre: centre,
+                median_rel_y: percentile(&mut rel.clone(), 0.5),
+                p99_rel_y: percentile(&mut rel, 0.99),
+                aureole_median_rel_y: (!aureole.is_empty()).then(|| percentile(&mut aureole.clone(), 0.5)),
+                aureole_p99_rel_y: (!aureole.is_empty()).then(|| percentile(&mut aureole, 0.99)),
+                median_de2000: percentile(&mut de.clone(), 0.5),
+                p99_de2000: percentile(&mut de, 0.99),
+                psnr_db: 10.0 * (peak * peak / (se / n).max(1e-300)).log10(),
+                reference_median_rel_stderr_y: percentile(&mut ref_rel, 0.5),
+            });
+        }
+        let mut noise: Vec<f64> = entry.slices.iter().map(|s| s.median_rel_stderr_y).collect();
+        let (qm, qp) = match cache.map(|c| quantisation(c, luts, entry, texture, &session, &sampling, quality)) {
+            Some(Some((m, p))) => (Some(m), Some(p)),
+            _ => (None, None),
+        };
+        out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp });
+    }
+    Ok(out)
+}
+
+/// The rounding error of the stored texels against the rendered ones, from
+/// the cached slices (None if the cache lacks them).
+fn quantisation(
+    cache: &SliceCache,
+    luts: &Luts,
+    entry: &crate::lut::manifest::SkyEntry,
+    texture: &crate::lut::decode::Texture,
+    session: &Session,
+    sampling: &super::Sampling,
+    quality: super::Quality,
+) -> Option<(f64, f64)> {
+    let space: ColourSpace = luts.manifest.colour.space.parse().ok()?;
+    let sky = super::BasisSky {
+        name: entry.name.clone(),
+        atmosphere: Default::default(),
+        width: entry.width,
+        height: entry.height,
+        slices: entry.layers,
+        altitude_m: entry.altitude_m,
+        line: 0,
+        draft: sampling.clone(),
+        final_: sampling.clone(),
+    };
+    let mut rel = Vec::new();
+    for (index, s) in entry.slices.iter().enumerate() {
+        let view = super::run::slice_view(&sky, sampling, index, entry.planet_radius_km, entry.top_km, entry.threshold_sun_zenith_deg);
+        let key = super::cache::slice_key(&session.atmosphere.content_hash, &session.spectral, &view, quality.name());
+        let slice = cache.get(&key)?;
+        let scale = (-s.scale_log2 as f64).exp2();
+        for (t, x) in texture.layers[index].iter().zip(&slice.xyz) {
+            let rgb = space.convert(*x).map(|c| c.max(0.0));
+            let stored = t.map(|c| c as f64 * scale);
+            // Relative to the texel's largest channel: Y of clamped RGB can be
+            // near 0 while B is not, and B's rounding would then look huge.
+            // Texels below the format's normal range (2^-14 after the slice's
+            // scale) lose precision by design; the manifest counts them.
+            let top = rgb.iter().copied().fold(0.0, f64::max);
+            if top / scale >= (-14f64).exp2() {
+                rel.push((0..3).map(|c| (stored[c] - rgb[c]).abs()).fold(0.0, f64::max) / top);
+            }
+        }
+    }
+    Some((percentile(&mut rel.clone(), 0.5), percentile(&mut rel, 0.99)))
+}
+
+/// The decoded twilight of one basis sky: (sun elevation, Y at the zenith,
+/// Y on the horizon toward the sun, Y on the horizon away from it), the sun
+/// from 0 to −10° in 0.1° steps; the horizon read at 1° elevation.
+pub fn twilight_curve(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, texture: &crate::lut::decode::Texture) -> Vec<[f64; 4]> {
+    (0..=100)
+        .map(|k| {
+            let e = -0.1 * k as f64;
+            let y = |z: f64, a: f64| luts.sample_xyz_of(entry, texture, e, direction_deg(z, a))[1];
+            [e, y(0.0, 0.0), y(89.0, 0.0), y(89.0, 180.0)]
+        })
+        .collect()
+}
+
+/// The largest change of log Y from one 0.1° step to the next along a
+/// curve's three directions.
+pub fn largest_log_step(curve: &[[f64; 4]]) -> f64 {
+    let mut worst: f64 = 0.0;
+    for w in curve.windows(2) {
+        for c in 1..4 {
+            if w[0][c] > 0.0 && w[1][c] > 0.0 {
+                worst = worst.max((w[1][c] / w[0][c]).ln().abs());
+            }
+        }
+    }
+    worst
+}
+
+/// What the atmosphere itself does at twilight: the largest change of log Y
+/// per 0.1° of sun elevation in direct renders at the curve's three
+/// directions, the sun from 0 to −10° in 0.5° steps (the change over each
+/// step over 5).
+pub fn reference_twilight_step(
+    bake: &BakeFile,
+    sky_name: &str,
+    quality: super::Quality,
+    spp: u32,
+    optics: &OpticsCache,
+    mie: &MieCache,
+    workers: Vec<WorkerSpec>,
+    cancel: Arc<AtomicBool>,
+) -> Result<f64, BakeError> {
+    let sky = bake.skies.iter().find(|s| s.name == sky_name).ok_or_else(|| BakeError::NoSuchSlice(sky_name.to_string()))?;
+    let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
+    let sampling = sky.sampling(quality).clone();
+    let session = Session::new(atm, bundle, spectral_settings(&sampling), optics, mie, workers, Options::default(), &|| {});
+    let dirs = vec![(0.0, 0.0), (89.0, 0.0), (89.0, 180.0)];
+    let mut ys: Vec<[f64; 3]> = Vec::new();
+    for k in 0..=20 {
+        let elev = -0.5 * k as f64;
+        let view = View {
+            camera: Camera::Directions(dirs.clone()),
+            width: 3,
+            height: 1,
+            sun_zenith_deg: 90.0 - elev,
+            sun_azimuth_deg: 0.0,
+            altitude_m: sky.altitude_m,
+            spp,
+            seed: REFERENCE_SEED,
+            estimator: Estimator::Full,
+            sun_disk: false,
+            max_rel_error: None,
+        };
+        let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
+        ys.push([r.image.pixels[0].xyz[1], r.image.pixels[1].xyz[1], r.image.pixels[2].xyz[1]]);
+    }
+    let mut worst: f64 = 0.0;
+    for w in ys.windows(2) {
+        for c in 0..3 {
+            if w[0][c] > 0.0 && w[1][c] > 0.0 {
+                worst = worst.max((w[1][c] / w[0][c]).ln().abs() / 5.0);
+            }
+        }
+    }
+    Ok(worst)
+}
