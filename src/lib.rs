@@ -9,11 +9,14 @@
 //! - [`farm`]: the render farm (`sky worker` and the distributed `sky render`);
 //! - [`lut`]: the talk's adaptive LUT mappings;
 //! - [`spectrum`]: colour matching functions and the solar spectrum;
+//! - [`session`]: prepared optics by hash, and views rendered with them;
+//! - [`lru`]: the memory-bounded cache that keeps prepared optics;
 //! - [`table`]: the tabulated data files of `atmospheres/data/`;
 //! - [`plot`]: PNG plots for people.
 
 pub mod atmosphere;
 pub mod farm;
+pub mod lru;
 pub mod lut;
 pub mod mie;
 pub mod plot;

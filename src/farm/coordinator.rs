@@ -23,13 +23,14 @@
 //! render and a farm render are the same code path and bit-identical.
 
 use super::events::{self, EventSink, FarmEvent, Progress};
+pub use super::job::FarmJob;
 use super::journal::Journal;
 use super::proto::worker_client::WorkerClient;
 use super::proto::{self, render_event::Event, WorkerState};
 use super::protocol::{classify, TaskError};
 use super::{tile, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
-use crate::render::{self, PixelResult, Scene, Settings};
-use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use crate::render::{self, PixelResult, Scene};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -108,13 +109,6 @@ impl Default for Options {
             fault_kill_after_columns: None,
         }
     }
-}
-
-/// The job as the coordinator holds it.
-pub struct FarmJob {
-    pub message: proto::Job,
-    pub hash: String,
-    pub settings: Settings,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -524,10 +518,15 @@ impl Sched {
 
     /// Counts a failure against a worker (and the columns it was on).
     fn blame(&mut self, w: usize, err: TaskError, columns: Option<(u32, u32)>) {
+        let err = match err {
+            TaskError::OpticsMissing => TaskError::Failed("the worker lost the task's optics".into()),
+            e => e,
+        };
         match err {
             TaskError::Cancelled => {}
             TaskError::Paused(reason) => self.workers[w].state = format!("paused ({reason})"),
             TaskError::Refused(msg) => self.quarantine(w, msg),
+            TaskError::OpticsMissing => unreachable!("made a failure above"),
             TaskError::Failed(msg) => {
                 if let Some(e) = &self.opts.events {
                     e.emit(&FarmEvent::TaskFailed { worker: self.workers[w].name.clone(), message: msg.clone() });
@@ -591,19 +590,11 @@ struct Shared {
     cancel: Arc<AtomicBool>,
 }
 
-/// Renders `job` across `workers`. `local_scene` is the prepared scene for
-/// the embedded worker (needed if one of `workers` is `Local`); `resumed`
-/// holds columns from a journal; `journal`, if any, receives every newly
-/// accepted column. `cancel` stops the render (the journal stays).
-pub async fn run(
-    job: Arc<FarmJob>,
-    workers: Vec<WorkerSpec>,
-    local_scene: Option<Arc<Scene>>,
-    resumed: BTreeMap<u32, proto::Tile>,
-    journal: Option<Journal>,
-    opts: Options,
-    cancel: Arc<AtomicBool>,
-) -> Result<Outcome, FarmError> {
+/// Renders `job` across `workers` (the embedded one renders with the job's
+/// prepared scene, remote ones get its optics when they lack them);
+/// `resumed` holds columns from a journal; `journal`, if any, receives every
+/// newly accepted column. `cancel` stops the render (the journal stays).
+pub async fn run(job: Arc<FarmJob>, workers: Vec<WorkerSpec>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
     let s = &job.settings;
     let (width, height) = (s.view.width as u32, s.view.height as u32);
     let lines = s.spectral.spectral_nm.len() as u32;
@@ -661,8 +652,8 @@ pub async fn run(
     let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period, width as u64 * height as u64));
     let mut drivers = Vec::new();
     for (w, spec) in workers.into_iter().enumerate() {
-        let (shared, job, opts, local_scene) = (shared.clone(), job.clone(), opts.clone(), local_scene.clone());
-        drivers.push(tokio::spawn(async move { drive(w, spec, shared, job, opts, local_scene).await }));
+        let (shared, job, opts) = (shared.clone(), job.clone(), opts.clone());
+        drivers.push(tokio::spawn(async move { drive(w, spec, shared, job, opts).await }));
     }
     for d in drivers {
         let _ = d.await;
@@ -685,7 +676,7 @@ pub async fn run(
 }
 
 /// One worker's loop: take a task, run it, report, until the job is done.
-async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options, local_scene: Option<Arc<Scene>>) {
+async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options) {
     let mut named = true;
     let mut backend = match spec {
         WorkerSpec::Local { threads } => {
@@ -697,16 +688,11 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
                     return;
                 }
             };
-            let Some(scene) = local_scene else {
-                shared.sched.lock().unwrap().quarantine(w, "no prepared scene for the embedded worker".into());
-                shared.changed.notify_waiters();
-                return;
-            };
-            Backend::Local { pool, scene }
+            Backend::Local { pool, scene: job.optics.scene.clone() }
         }
         WorkerSpec::Remote { uri, name } => {
             named = name.is_some();
-            Backend::Remote { uri, client: None, has_job: false, hello_name: None }
+            Backend::Remote { uri, client: None, held: HashSet::new(), hello_name: None }
         }
     };
     let (inflight, preparing) = {
@@ -809,8 +795,18 @@ async fn wait_or_done(shared: &Shared, w: usize, d: Duration) -> bool {
 // variants does not matter.
 #[allow(clippy::large_enum_variant)]
 enum Backend {
-    Local { pool: Arc<rayon::ThreadPool>, scene: Arc<Scene> },
-    Remote { uri: String, client: Option<Client>, has_job: bool, hello_name: Option<String> },
+    Local {
+        pool: Arc<rayon::ThreadPool>,
+        scene: Arc<Scene>,
+    },
+    /// `held`: the optics hashes the worker holds, as far as we know (from
+    /// its Hello, and the optics sent to it since).
+    Remote {
+        uri: String,
+        client: Option<Client>,
+        held: HashSet<String>,
+        hello_name: Option<String>,
+    },
 }
 
 type Client = WorkerClient<tonic::service::interceptor::InterceptedService<Channel, Auth>>;
@@ -856,11 +852,10 @@ fn error_chain(e: &dyn std::error::Error) -> String {
 impl Backend {
     /// Ok(None) when ready, Ok(Some(reason)) when paused.
     async fn ready(&mut self, opts: &Options) -> Result<Option<String>, TaskError> {
-        let Backend::Remote { uri, client, has_job, hello_name } = self else { return Ok(None) };
+        let Backend::Remote { uri, client, held, hello_name } = self else { return Ok(None) };
         if client.is_none() {
             let c = connect(uri, opts.token.as_deref(), opts.tls.clone(), Duration::from_secs(5)).await.map_err(TaskError::Failed)?;
             *client = Some(c);
-            *has_job = false;
         }
         let c = client.as_mut().unwrap();
         let hello = proto::HelloRequest { protocol_version: PROTOCOL_VERSION, build_version: super::build_version(), coordinator: "sky render".into() };
@@ -879,6 +874,7 @@ impl Backend {
             Ok(Ok(r)) => r.into_inner(),
         };
         *hello_name = Some(reply.name.clone());
+        *held = reply.optics_held.iter().cloned().collect();
         if reply.protocol_version != PROTOCOL_VERSION {
             return Err(TaskError::Refused(format!("worker {} at {uri} speaks farm protocol {}, this coordinator {PROTOCOL_VERSION}", reply.name, reply.protocol_version)));
         }
@@ -896,11 +892,12 @@ impl Backend {
         Ok(None)
     }
 
-    /// Drops the connection, so the next task reconnects and resends the job.
+    /// Drops the connection, so the next task reconnects (and learns from
+    /// the worker's Hello which optics it holds).
     fn forget(&mut self) {
-        if let Backend::Remote { client, has_job, .. } = self {
+        if let Backend::Remote { client, held, .. } = self {
             *client = None;
-            *has_job = false;
+            held.clear();
         }
     }
 
@@ -937,27 +934,38 @@ impl Backend {
                 let tile = tile::encode(&job.hash, t.id, t.first, s.view.height as u32, s.spectral.spectral_nm.len(), &cols);
                 tile::decode(&tile, &want).map_err(|e| TaskError::Failed(format!("invalid result: {e}")))
             }
-            Backend::Remote { uri, client, has_job, .. } => {
+            Backend::Remote { uri, client, held, .. } => {
                 let Some(c) = client.as_mut() else { return Err(TaskError::Failed(format!("{uri}: not connected"))) };
-                let mut send_job = !*has_job;
+                let optics_hash = &job.optics.hash;
+                // The optics go only to a worker that lacks them.
+                let mut send_optics = !held.contains(optics_hash);
                 let mut stream = loop {
                     let task = proto::RenderTask {
                         protocol_version: PROTOCOL_VERSION,
                         build_version: super::build_version(),
                         job_hash: job.hash.clone(),
-                        job: send_job.then(|| job.message.clone()),
                         task_id: t.id,
                         first_column: t.first,
                         columns: t.count,
+                        optics_hash: optics_hash.clone(),
+                        optics: send_optics.then(|| job.optics.message().clone()),
+                        view_json: job.view_json.clone(),
                     };
                     match tokio::time::timeout(opts.lease, c.render(task)).await {
                         Err(_) => return Err(TaskError::Failed(format!("{uri}: no answer within the lease of {:?}", opts.lease))),
-                        Ok(Err(status)) if status.code() == tonic::Code::NotFound && !send_job => send_job = true,
-                        Ok(Err(status)) => return Err(classify(&status)),
+                        Ok(Err(status)) => match classify(&status) {
+                            // Evicted since its Hello: send them.
+                            TaskError::OpticsMissing if !send_optics => {
+                                held.remove(optics_hash);
+                                send_optics = true;
+                            }
+                            TaskError::OpticsMissing => return Err(TaskError::Failed(format!("{uri}: asked for the optics it was just sent"))),
+                            e => return Err(e),
+                        },
                         Ok(Ok(r)) => break r.into_inner(),
                     }
                 };
-                *has_job = true;
+                held.insert(optics_hash.clone());
                 let mut cancel = t.cancel.clone();
                 loop {
                     if stop.load(Ordering::Relaxed) {
