@@ -11,7 +11,7 @@
 //! travel under that hash too, to each worker once.
 
 use crate::atmosphere::{Atmosphere, Bundle};
-use crate::farm::coordinator::{self, FarmError, Options, Outcome, WorkerSpec};
+use crate::farm::coordinator::{self, Farm, FarmError, Options, Outcome, WorkerSpec};
 use crate::farm::job::{FarmJob, Optics};
 use crate::farm::journal::Journal;
 use crate::farm::proto;
@@ -21,7 +21,7 @@ use crate::render::{Image, Scene, SpectralSettings, View};
 use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 /// The name of an atmosphere's optics for one spectral setting: BLAKE3 of
 /// the atmosphere's content hash (the file and every data file it reads)
@@ -81,7 +81,10 @@ impl OpticsCache {
 }
 
 /// One atmosphere and spectral setting with their prepared optics, and the
-/// workers and farm policy its views render with.
+/// workers and farm policy its views render with. The farm (its runtime,
+/// its worker connections, what optics each worker holds) is made at the
+/// first render and kept for the next views: a worker is greeted once and
+/// gets the optics at most once per session, however many views it renders.
 pub struct Session {
     pub atmosphere: Atmosphere,
     pub spectral: SpectralSettings,
@@ -90,6 +93,16 @@ pub struct Session {
     optics: Arc<Optics>,
     workers: Vec<WorkerSpec>,
     options: Options,
+    farm: Mutex<Option<(tokio::runtime::Runtime, Farm)>>,
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        if let Some((rt, farm)) = self.farm.get_mut().ok().and_then(Option::take) {
+            drop(farm);
+            rt.shutdown_background();
+        }
+    }
 }
 
 /// A view's pixels as the farm delivered them.
@@ -113,7 +126,7 @@ impl Session {
     ) -> Session {
         let scene = cache.get(&atmosphere, &spectral, mie, on_step);
         let optics = Arc::new(Optics::new(&atmosphere, bundle, scene.clone()));
-        Session { atmosphere, spectral, scene, optics, workers, options }
+        Session { atmosphere, spectral, scene, optics, workers, options, farm: Mutex::new(None) }
     }
 
     /// The hash the session's optics travel under ([`optics_hash`]).
@@ -130,11 +143,14 @@ impl Session {
     /// an earlier run already in `resumed` and new ones going to `journal`.
     pub fn render(&self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, cancel: Arc<AtomicBool>) -> Result<Rendered, FarmError> {
         let (width, height) = (job.settings.view.width, job.settings.view.height);
-        let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
-        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
-        let outcome: Result<Outcome, FarmError> = rt.block_on(coordinator::run(job, workers, resumed, journal, self.options.clone(), cancel));
-        rt.shutdown_background();
-        let outcome = outcome?;
+        let mut farm = self.farm.lock().unwrap_or_else(|e| e.into_inner());
+        if farm.is_none() {
+            let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
+            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
+            *farm = Some((rt, Farm::new(workers)));
+        }
+        let (rt, farm) = farm.as_mut().expect("made above");
+        let outcome: Outcome = rt.block_on(farm.render(job, resumed, journal, &self.options, cancel))?;
         let mut pixels = Vec::with_capacity(width * height);
         for y in 0..height {
             for col in &outcome.columns {

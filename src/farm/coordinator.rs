@@ -29,7 +29,8 @@ use super::proto::worker_client::WorkerClient;
 use super::proto::{self, render_event::Event, WorkerState};
 use super::protocol::{classify, TaskError};
 use super::{tile, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
-use crate::render::{self, PixelResult, Scene};
+use crate::render::{self, PixelResult};
+use prost::Message;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet, VecDeque};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -126,7 +127,7 @@ pub enum FarmError {
 }
 
 /// One worker's figures.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct WorkerStats {
     pub name: String,
     /// HOST:PORT, or "local" for the embedded worker.
@@ -137,6 +138,13 @@ pub struct WorkerStats {
     pub columns_per_s: f64,
     pub failures: usize,
     pub quarantined: Option<String>,
+    /// Connections and Hellos made, and what was sent, in this render.
+    pub connects: u64,
+    pub hellos: u64,
+    pub requests: u64,
+    pub request_bytes: u64,
+    pub optics_sent: u64,
+    pub optics_bytes: u64,
 }
 
 /// What a render did.
@@ -224,6 +232,7 @@ struct WState {
     inflight_pixels: Arc<AtomicU64>,
     /// Whether the worker is still preparing the job's optics.
     preparing: Arc<AtomicBool>,
+    traffic: Arc<Traffic>,
 }
 
 struct Sched {
@@ -565,6 +574,12 @@ impl Sched {
                 columns_per_s: w.speed.unwrap_or(0.0),
                 failures: w.failures,
                 quarantined: w.quarantined.clone(),
+                connects: w.traffic.connects.load(Ordering::Relaxed),
+                hellos: w.traffic.hellos.load(Ordering::Relaxed),
+                requests: w.traffic.requests.load(Ordering::Relaxed),
+                request_bytes: w.traffic.request_bytes.load(Ordering::Relaxed),
+                optics_sent: w.traffic.optics_sent.load(Ordering::Relaxed),
+                optics_bytes: w.traffic.optics_bytes.load(Ordering::Relaxed),
             })
             .collect();
         s
@@ -590,114 +605,155 @@ struct Shared {
     cancel: Arc<AtomicBool>,
 }
 
-/// Renders `job` across `workers` (the embedded one renders with the job's
-/// prepared scene, remote ones get its optics when they lack them);
-/// `resumed` holds columns from a journal; `journal`, if any, receives every
-/// newly accepted column. `cancel` stops the render (the journal stays).
+/// Renders `job` across `workers` once: a [`Farm`] for one render.
 pub async fn run(job: Arc<FarmJob>, workers: Vec<WorkerSpec>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
-    let s = &job.settings;
-    let (width, height) = (s.view.width as u32, s.view.height as u32);
-    let lines = s.spectral.spectral_nm.len() as u32;
-    let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
-    let mut stats = Stats { columns_total: width, ..Default::default() };
-    for (c, t) in &resumed {
-        let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
-        if let Ok(mut cols) = tile::decode(t, &want) {
-            if (*c as usize) < columns.len() {
-                columns[*c as usize] = cols.pop();
-                stats.columns_resumed += 1;
-            }
-        }
-    }
-    let pending: BTreeSet<u32> = (0..width).filter(|&c| columns[c as usize].is_none()).collect();
-    let wstates = workers
-        .iter()
-        .map(|w| WState {
-            name: w.name(),
-            address: w.address(),
-            state: "connecting".into(),
-            failures: 0,
-            tasks_done: 0,
-            columns_done: 0,
-            speed: None,
-            quarantined: None,
-            inflight_pixels: Arc::new(AtomicU64::new(0)),
-            preparing: Arc::new(AtomicBool::new(false)),
-        })
-        .collect();
-    let shared = Arc::new(Shared {
-        sched: Mutex::new(Sched {
-            width,
-            height,
-            lines,
-            job_hash: job.hash.clone(),
-            columns,
-            producer: vec![None; width as usize],
-            pending,
-            tasks: BTreeMap::new(),
-            verify_queue: VecDeque::new(),
-            checks: BTreeMap::new(),
-            next_check: 1,
-            column_failures: HashMap::new(),
-            workers: wstates,
-            next_id: 1,
-            fatal: None,
-            journal,
-            stats,
-            opts: opts.clone(),
-        }),
-        changed: Notify::new(),
-        cancel: cancel.clone(),
-    });
-    let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period, width as u64 * height as u64));
-    let mut drivers = Vec::new();
-    for (w, spec) in workers.into_iter().enumerate() {
-        let (shared, job, opts) = (shared.clone(), job.clone(), opts.clone());
-        drivers.push(tokio::spawn(async move { drive(w, spec, shared, job, opts).await }));
-    }
-    for d in drivers {
-        let _ = d.await;
-    }
-    progress.abort();
-    let _ = progress.await;
-    let mut sched = shared.sched.lock().unwrap();
-    if cancel.load(Ordering::Relaxed) {
-        return Err(FarmError::Cancelled);
-    }
-    if let Some(e) = sched.fatal.take() {
-        return Err(e);
-    }
-    if !sched.complete() {
-        return Err(FarmError::NoWorkers { report: sched.report() });
-    }
-    let stats = sched.snapshot();
-    let columns = std::mem::take(&mut sched.columns).into_iter().map(|c| c.expect("complete")).collect();
-    Ok(Outcome { columns, stats })
+    Farm::new(workers).render(job, resumed, journal, &opts, cancel).await
 }
 
-/// One worker's loop: take a task, run it, report, until the job is done.
-async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options) {
-    let mut named = true;
-    let mut backend = match spec {
-        WorkerSpec::Local { threads } => {
-            let pool = match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
-                Ok(p) => Arc::new(p),
-                Err(e) => {
-                    shared.sched.lock().unwrap().quarantine(w, format!("cannot start {threads} threads: {e}"));
-                    shared.changed.notify_waiters();
-                    return;
+/// A coordinator's workers, kept across the renders (views) of a session:
+/// the connections (greeted once, polled again only while paused), the
+/// optics each worker holds as far as the coordinator knows, names from
+/// the workers' Hello, the embedded worker's threads, and quarantines (a
+/// worker quarantined in one view stays out of the later ones).
+pub struct Farm {
+    slots: Vec<Slot>,
+}
+
+struct Slot {
+    spec: WorkerSpec,
+    /// None until the first render, and while a render holds it.
+    backend: Option<Backend>,
+    name: String,
+    quarantined: Option<String>,
+}
+
+impl Farm {
+    pub fn new(workers: Vec<WorkerSpec>) -> Farm {
+        Farm { slots: workers.into_iter().map(|spec| Slot { name: spec.name(), spec, backend: None, quarantined: None }).collect() }
+    }
+
+    /// Renders `job` (the embedded worker renders with the job's prepared
+    /// scene, remote ones get its optics when they lack them); `resumed`
+    /// holds columns from a journal; `journal`, if any, receives every
+    /// newly accepted column. `cancel` stops the render (the journal stays).
+    pub async fn render(&mut self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: &Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
+        let s = &job.settings;
+        let (width, height) = (s.view.width as u32, s.view.height as u32);
+        let lines = s.spectral.spectral_nm.len() as u32;
+        let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
+        let mut stats = Stats { columns_total: width, ..Default::default() };
+        for (c, t) in &resumed {
+            let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
+            if let Ok(mut cols) = tile::decode(t, &want) {
+                if (*c as usize) < columns.len() {
+                    columns[*c as usize] = cols.pop();
+                    stats.columns_resumed += 1;
                 }
-            };
-            Backend::Local { pool, scene: job.optics.scene.clone() }
+            }
         }
-        WorkerSpec::Remote { uri, name } => {
-            named = name.is_some();
-            Backend::Remote { uri, client: None, held: HashSet::new(), hello_name: None }
+        let pending: BTreeSet<u32> = (0..width).filter(|&c| columns[c as usize].is_none()).collect();
+        // Backends made on first use; one that cannot be made quarantines its worker.
+        for slot in &mut self.slots {
+            if slot.backend.is_none() && slot.quarantined.is_none() {
+                match Backend::new(&slot.spec) {
+                    Ok(b) => slot.backend = Some(b),
+                    Err(e) => slot.quarantined = Some(e),
+                }
+            }
         }
-    };
-    let (inflight, preparing) = {
+        let wstates = self
+            .slots
+            .iter()
+            .map(|slot| WState {
+                name: slot.name.clone(),
+                address: slot.spec.address(),
+                state: if slot.quarantined.is_some() { "quarantined".into() } else { "connecting".into() },
+                failures: 0,
+                tasks_done: 0,
+                columns_done: 0,
+                speed: None,
+                quarantined: slot.quarantined.clone(),
+                inflight_pixels: Arc::new(AtomicU64::new(0)),
+                preparing: Arc::new(AtomicBool::new(false)),
+                traffic: Arc::new(Traffic::default()),
+            })
+            .collect();
+        let shared = Arc::new(Shared {
+            sched: Mutex::new(Sched {
+                width,
+                height,
+                lines,
+                job_hash: job.hash.clone(),
+                columns,
+                producer: vec![None; width as usize],
+                pending,
+                tasks: BTreeMap::new(),
+                verify_queue: VecDeque::new(),
+                checks: BTreeMap::new(),
+                next_check: 1,
+                column_failures: HashMap::new(),
+                workers: wstates,
+                next_id: 1,
+                fatal: None,
+                journal,
+                stats,
+                opts: opts.clone(),
+            }),
+            changed: Notify::new(),
+            cancel: cancel.clone(),
+        });
+        {
+            let mut sched = shared.sched.lock().unwrap();
+            if sched.live_workers() == 0 && !sched.complete() {
+                sched.fatal = Some(FarmError::NoWorkers { report: sched.report() });
+            }
+        }
+        let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period, width as u64 * height as u64));
+        let mut drivers = Vec::new();
+        for (w, slot) in self.slots.iter_mut().enumerate() {
+            if slot.quarantined.is_some() {
+                continue;
+            }
+            let Some(backend) = slot.backend.take() else { continue };
+            let named = matches!(&slot.spec, WorkerSpec::Local { .. } | WorkerSpec::Remote { name: Some(_), .. });
+            let (shared, job, opts) = (shared.clone(), job.clone(), opts.clone());
+            drivers.push((w, tokio::spawn(async move { drive(w, backend, named, shared, job, opts).await })));
+        }
+        for (w, d) in drivers {
+            // A driver that panicked loses its backend: the next render makes a new one.
+            if let Ok(b) = d.await {
+                self.slots[w].backend = Some(b);
+            }
+        }
+        progress.abort();
+        let _ = progress.await;
+        let mut sched = shared.sched.lock().unwrap();
+        for (slot, ws) in self.slots.iter_mut().zip(&sched.workers) {
+            slot.name = ws.name.clone();
+            slot.quarantined = ws.quarantined.clone();
+        }
+        if cancel.load(Ordering::Relaxed) {
+            return Err(FarmError::Cancelled);
+        }
+        if let Some(e) = sched.fatal.take() {
+            return Err(e);
+        }
+        if !sched.complete() {
+            return Err(FarmError::NoWorkers { report: sched.report() });
+        }
+        let stats = sched.snapshot();
+        let columns = std::mem::take(&mut sched.columns).into_iter().map(|c| c.expect("complete")).collect();
+        Ok(Outcome { columns, stats })
+    }
+}
+
+/// One worker's loop: take a task, run it, report, until the job is done;
+/// gives the backend (its connection) back for the next render. `named`:
+/// the farm file names the worker (else it goes by its Hello's name).
+async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options) -> Backend {
+    let (inflight, preparing, traffic) = {
         let s = shared.sched.lock().unwrap();
-        (s.workers[w].inflight_pixels.clone(), s.workers[w].preparing.clone())
+        (s.workers[w].inflight_pixels.clone(), s.workers[w].preparing.clone(), s.workers[w].traffic.clone())
     };
     let mut backoff = Duration::from_millis(500);
     loop {
@@ -705,7 +761,7 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
             break;
         }
         // Be connected, agree on versions and not be paused before taking work.
-        let ready = backend.ready(&opts).await;
+        let ready = backend.ready(&opts, &traffic).await;
         if let (false, Backend::Remote { hello_name: Some(n), .. }) = (named, &backend) {
             // Unnamed in the farm file: the worker's own --name.
             shared.sched.lock().unwrap().workers[w].name = n.clone();
@@ -755,7 +811,7 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
             }
             Assign::Task(t) => {
                 let started = Instant::now();
-                let result = backend.run(&t, &job, &opts, (&inflight, &preparing), &shared.cancel).await;
+                let result = backend.run(&t, &job, &opts, (&inflight, &preparing), &traffic, &shared.cancel).await;
                 preparing.store(false, Ordering::Relaxed);
                 {
                     let mut s = shared.sched.lock().unwrap();
@@ -763,8 +819,11 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
                         Ok(cols) => s.finish(w, t.id, cols, started),
                         Err(e) => {
                             let render = s.tasks.get(&t.id).is_none_or(|task| task.kind == Kind::Render);
-                            if let TaskError::Failed(_) = &e {
-                                backend.forget();
+                            match &e {
+                                TaskError::Failed(_) => backend.forget(),
+                                // Poll it with Hello until it resumes.
+                                TaskError::Paused(_) => backend.unready(),
+                                _ => {}
                             }
                             s.release(w, t.id, matches!(e, TaskError::Cancelled));
                             s.blame(w, e, render.then_some((t.first, t.count)));
@@ -776,6 +835,7 @@ async fn drive(w: usize, spec: WorkerSpec, shared: Arc<Shared>, job: Arc<FarmJob
         }
     }
     shared.changed.notify_waiters();
+    backend
 }
 
 /// Waits for a change or `d`; true if the job is over (done, failed or cancelled).
@@ -797,16 +857,39 @@ async fn wait_or_done(shared: &Shared, w: usize, d: Duration) -> bool {
 enum Backend {
     Local {
         pool: Arc<rayon::ThreadPool>,
-        scene: Arc<Scene>,
     },
     /// `held`: the optics hashes the worker holds, as far as we know (from
-    /// its Hello, and the optics sent to it since).
+    /// its Hello, and the optics sent to it since); `greeted`: its Hello
+    /// said it is ready (asked again only after a reconnect or a pause).
     Remote {
         uri: String,
         client: Option<Client>,
         held: HashSet<String>,
         hello_name: Option<String>,
+        greeted: bool,
     },
+}
+
+/// What a coordinator sent one worker in one render.
+#[derive(Debug, Default)]
+pub struct Traffic {
+    /// Connections made.
+    pub connects: AtomicU64,
+    /// Hello calls made.
+    pub hellos: AtomicU64,
+    /// Render calls made (a task resent with its optics counts twice).
+    pub requests: AtomicU64,
+    /// Bytes of those calls' messages, optics included.
+    pub request_bytes: AtomicU64,
+    /// Times the optics went along, and their bytes.
+    pub optics_sent: AtomicU64,
+    pub optics_bytes: AtomicU64,
+}
+
+impl Traffic {
+    fn add(n: &AtomicU64, v: u64) {
+        n.fetch_add(v, Ordering::Relaxed);
+    }
 }
 
 type Client = WorkerClient<tonic::service::interceptor::InterceptedService<Channel, Auth>>;
@@ -850,14 +933,30 @@ fn error_chain(e: &dyn std::error::Error) -> String {
 }
 
 impl Backend {
-    /// Ok(None) when ready, Ok(Some(reason)) when paused.
-    async fn ready(&mut self, opts: &Options) -> Result<Option<String>, TaskError> {
-        let Backend::Remote { uri, client, held, hello_name } = self else { return Ok(None) };
+    fn new(spec: &WorkerSpec) -> Result<Backend, String> {
+        Ok(match spec {
+            WorkerSpec::Local { threads } => {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(*threads).build().map_err(|e| format!("cannot start {threads} threads: {e}"))?;
+                Backend::Local { pool: Arc::new(pool) }
+            }
+            WorkerSpec::Remote { uri, .. } => Backend::Remote { uri: uri.clone(), client: None, held: HashSet::new(), hello_name: None, greeted: false },
+        })
+    }
+
+    /// Ok(None) when ready, Ok(Some(reason)) when paused. Connects and says
+    /// Hello only when not connected and greeted already.
+    async fn ready(&mut self, opts: &Options, traffic: &Traffic) -> Result<Option<String>, TaskError> {
+        let Backend::Remote { uri, client, held, hello_name, greeted } = self else { return Ok(None) };
+        if client.is_some() && *greeted {
+            return Ok(None);
+        }
         if client.is_none() {
             let c = connect(uri, opts.token.as_deref(), opts.tls.clone(), Duration::from_secs(5)).await.map_err(TaskError::Failed)?;
+            Traffic::add(&traffic.connects, 1);
             *client = Some(c);
         }
         let c = client.as_mut().unwrap();
+        Traffic::add(&traffic.hellos, 1);
         let hello = proto::HelloRequest { protocol_version: PROTOCOL_VERSION, build_version: super::build_version(), coordinator: "sky render".into() };
         let reply = match tokio::time::timeout(opts.lease, c.hello(hello)).await {
             Err(_) => {
@@ -889,27 +988,44 @@ impl Backend {
         if reply.state == WorkerState::Paused as i32 {
             return Ok(Some(reply.paused_reason));
         }
+        *greeted = true;
         Ok(None)
+    }
+
+    /// The worker paused: ask its Hello again before the next task.
+    fn unready(&mut self) {
+        if let Backend::Remote { greeted, .. } = self {
+            *greeted = false;
+        }
     }
 
     /// Drops the connection, so the next task reconnects (and learns from
     /// the worker's Hello which optics it holds).
     fn forget(&mut self) {
-        if let Backend::Remote { client, held, .. } = self {
+        if let Backend::Remote { client, held, greeted, .. } = self {
             *client = None;
             held.clear();
+            *greeted = false;
         }
     }
 
-    async fn run(&mut self, t: &Assignment, job: &FarmJob, opts: &Options, (inflight, preparing): (&Arc<AtomicU64>, &AtomicBool), stop: &AtomicBool) -> Result<Vec<Vec<PixelResult>>, TaskError> {
+    async fn run(
+        &mut self,
+        t: &Assignment,
+        job: &FarmJob,
+        opts: &Options,
+        (inflight, preparing): (&Arc<AtomicU64>, &AtomicBool),
+        traffic: &Traffic,
+        stop: &AtomicBool,
+    ) -> Result<Vec<Vec<PixelResult>>, TaskError> {
         let s = &job.settings;
         let want =
             tile::Expect { job_hash: &job.hash, task_id: t.id, first_column: t.first, columns: t.count, height: s.view.height as u32, lines: s.spectral.spectral_nm.len() as u32, spp: s.view.spp };
         match self {
-            Backend::Local { pool, scene } => {
+            Backend::Local { pool } => {
                 let flag = Arc::new(AtomicBool::new(false));
                 let work = {
-                    let (pool, scene, flag, inflight, job_settings) = (pool.clone(), scene.clone(), flag.clone(), inflight.clone(), s.clone());
+                    let (pool, scene, flag, inflight, job_settings) = (pool.clone(), job.optics.scene.clone(), flag.clone(), inflight.clone(), s.clone());
                     let (first, count) = (t.first as usize, t.count as usize);
                     tokio::task::spawn_blocking(move || {
                         pool.install(|| {
@@ -951,6 +1067,12 @@ impl Backend {
                         optics: send_optics.then(|| job.optics.message().clone()),
                         view_json: job.view_json.clone(),
                     };
+                    Traffic::add(&traffic.requests, 1);
+                    Traffic::add(&traffic.request_bytes, task.encoded_len() as u64);
+                    if let Some(o) = &task.optics {
+                        Traffic::add(&traffic.optics_sent, 1);
+                        Traffic::add(&traffic.optics_bytes, o.encoded_len() as u64);
+                    }
                     match tokio::time::timeout(opts.lease, c.render(task)).await {
                         Err(_) => return Err(TaskError::Failed(format!("{uri}: no answer within the lease of {:?}", opts.lease))),
                         Ok(Err(status)) => match classify(&status) {

@@ -328,19 +328,24 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared
         None => {
             let (o, hash) = (task.optics.clone().expect("checked by the caller"), task.optics_hash.clone());
             let shared = s.clone();
-            let work = tokio::task::spawn_blocking(move || -> Result<Scene, Status> {
+            // Kept even if the task is cancelled meanwhile: the coordinator
+            // counts them as sent.
+            let work = tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
                 let (atm, spectral, scene) = open_optics(&o, &hash)?;
-                Ok(match scene {
-                    Some(s) => s,
-                    None => shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {})),
-                })
+                let (scene, bytes) = match scene {
+                    Some(s) => (s, o.scene.len() as u64),
+                    None => {
+                        let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
+                        let bytes = s.encoded_bytes();
+                        (s, bytes)
+                    }
+                };
+                Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
             });
-            let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
+            match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
                 Ok(r) => r?,
                 Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
-            };
-            let bytes = scene.encoded_bytes();
-            s.optics.insert(task.optics_hash.clone(), Arc::new(scene), bytes)
+            }
         }
     };
     let (first, count) = task_columns(&task, view.width)?;
