@@ -594,3 +594,68 @@ impl Drop for Hogs {
         }
     }
 }
+
+/// A bake-shaped run: one atmosphere (the clear sky, whose optics weigh
+/// about 19 MB), 64 tiny views through one session over two workers. Each
+/// worker is connected and greeted once and gets the optics at most once;
+/// every view is bit-identical to a direct render. Prints the bytes each
+/// worker was sent against what protocol 1 sent (the job with its optics on
+/// the first task of every view): `cargo test --release --test farm
+/// a_bake -- --nocapture`.
+#[test]
+fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
+    use sky::farm::coordinator::{Options, WorkerSpec};
+    use sky::render::{camera::Camera, Settings, WavelengthSampling};
+    use sky::session::{OpticsCache, Session};
+    let mut farm = Farm::new();
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
+    let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
+    s.spectral.xyz = true;
+    s.spectral.wavelength_sampling = WavelengthSampling::Hero;
+    s.view.camera = Camera::Equirect;
+    (s.view.width, s.view.height) = (4, 4);
+    let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
+    let opts = Options { token: Some("s3cret-farm-token".into()), ..Options::default() };
+    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), workers, opts, &|| {});
+    let job = session.job(&s.view);
+    let optics_bytes = prost::Message::encoded_len(job.optics.message()) as u64;
+    let protocol1_job_bytes = optics_bytes + job.view_json.len() as u64;
+    assert!(optics_bytes > 10_000_000, "the clear sky's optics weigh {optics_bytes} bytes");
+    // Per worker (by address): connects, hellos, optics sent, their bytes,
+    // all request bytes, tasks, and the views it rendered in.
+    let mut totals: std::collections::BTreeMap<String, [u64; 7]> = Default::default();
+    for i in 0..64 {
+        let mut view = s.view.clone();
+        view.sun_zenith_deg = 1.0 + 1.4 * i as f64;
+        view.sun_azimuth_deg = (37 * i % 360) as f64;
+        let r = session.render_view(&view, Arc::new(AtomicBool::new(false))).unwrap_or_else(|e| panic!("view {i}: {e}"));
+        if i % 16 == 0 {
+            let want = sky::render::render(&session.scene, &view, &AtomicBool::new(false), &|| {}).unwrap();
+            assert!(r.image == want, "view {i}: the farm's render differs from a direct one");
+        }
+        for w in &r.stats.workers {
+            let t = totals.entry(w.address.clone()).or_default();
+            for (k, v) in [w.connects, w.hellos, w.optics_sent, w.optics_bytes, w.request_bytes, w.tasks_done, (w.tasks_done > 0) as u64].into_iter().enumerate() {
+                t[k] += v;
+            }
+        }
+    }
+    assert_eq!(totals.len(), 2);
+    eprintln!("64 views of {}x{} px, clear sky (optics {:.1} MB), 2 workers:", s.view.width, s.view.height, optics_bytes as f64 / 1e6);
+    for (addr, [connects, hellos, optics_sent, sent_optics_bytes, request_bytes, tasks, views]) in &totals {
+        eprintln!(
+            "  worker {addr}: {tasks} tasks in {views} views; {connects} connection, {hellos} hello; optics sent {optics_sent}x ({:.1} MB); all requests {:.2} MB (protocol 1: {:.0} MB, the job on the first task of each of its {views} views)",
+            *sent_optics_bytes as f64 / 1e6,
+            *request_bytes as f64 / 1e6,
+            (views * protocol1_job_bytes) as f64 / 1e6
+        );
+        assert!(*tasks > 0, "worker {addr} rendered nothing: {totals:?}");
+        assert_eq!((*connects, *hellos), (1, 1), "worker {addr} was connected or greeted again across the views");
+        assert_eq!(*optics_sent, 1, "worker {addr} got the optics {optics_sent} times");
+        assert_eq!(*sent_optics_bytes, optics_bytes);
+        // Everything but the one copy of the optics is small: views and headers.
+        assert!(*request_bytes < optics_bytes + 2_000 * tasks, "worker {addr}: {request_bytes} bytes for {tasks} tasks");
+    }
+}
