@@ -10,8 +10,14 @@
 //!   pass before it is accepted;
 //! - [`journal`]: accepted columns on disk, so an interrupted render resumes;
 //! - [`worker`]: the gRPC service and the owner-first policies of a worker;
-//! - [`coordinator`]: leases, re-queues, duplicates, verification,
-//!   quarantine and progress, over remote workers or the embedded one.
+//! - [`scheduler`]: assignment, leases, duplicates, verification and
+//!   quarantine, with no network and no clock;
+//! - [`transport`]: the coordinator's side of the wire, one backend per
+//!   worker (remote, or the embedded one);
+//! - [`coordinator`]: drives the scheduler over the transport, keeps the
+//!   workers' connections across a session's views, reports progress;
+//! - [`protocol`]: what worker states and failures mean on the wire;
+//! - [`stats`]: what a render reports.
 
 pub mod config;
 pub mod coordinator;
@@ -19,7 +25,10 @@ pub mod events;
 pub mod job;
 pub mod journal;
 pub mod protocol;
+pub mod scheduler;
+pub mod stats;
 pub mod tile;
+pub mod transport;
 pub mod worker;
 
 /// The generated gRPC code (proto/sky/farm/v1/farm.proto).
