@@ -10,12 +10,15 @@
 //! - [`bake`]: `sky bake-luts`, the basis-sky LUTs rendered, cached and packed;
 //! - [`lut`]: the talk's adaptive LUT mappings, the weather rule and the reference decoder;
 //! - [`spectrum`]: colour matching functions and the solar spectrum;
+//! - [`session`]: prepared optics by hash, and views rendered with them;
+//! - [`lru`]: the memory-bounded cache that keeps prepared optics;
 //! - [`table`]: the tabulated data files of `atmospheres/data/`;
 //! - [`plot`]: PNG plots for people.
 
 pub mod atmosphere;
 pub mod bake;
 pub mod farm;
+pub mod lru;
 pub mod lut;
 pub mod mie;
 pub mod plot;

@@ -6,16 +6,21 @@
 //! Sessions share prepared optics through an [`OpticsCache`] keyed by
 //! [`optics_hash`]: the atmosphere bundle's content hash and the spectral
 //! settings, nothing of the view, so a second view of the same atmosphere
-//! prepares nothing.
+//! prepares nothing. The cache is bounded by memory (the same
+//! [`MemoryLru`] a worker keeps its optics in). On the farm the optics
+//! travel under that hash too, to each worker once.
 
 use crate::atmosphere::{Atmosphere, Bundle};
-use crate::farm::coordinator::{self, FarmError, FarmJob, Options, Outcome, WorkerSpec};
+use crate::farm::coordinator::{self, Farm, FarmError, Options, Outcome, WorkerSpec};
+use crate::farm::job::{FarmJob, Optics};
 use crate::farm::journal::Journal;
-use crate::farm::{job, proto};
+use crate::farm::proto;
+use crate::lru::MemoryLru;
 use crate::mie::MieCache;
-use crate::render::{Image, Scene, Settings, SpectralSettings, View};
-use std::collections::{BTreeMap, HashMap};
+use crate::render::{Image, Scene, SpectralSettings, View};
+use std::collections::BTreeMap;
 use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// The name of an atmosphere's optics for one spectral setting: BLAKE3 of
@@ -26,42 +31,78 @@ pub fn optics_hash(atm: &Atmosphere, spectral: &SpectralSettings) -> String {
     blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
 }
 
-/// Prepared optics by [`optics_hash`], kept for the life of the cache.
-#[derive(Default)]
+/// Prepared optics by [`optics_hash`], at most a budget of bytes of them
+/// (least recently used evicted first; optics a session holds never).
 pub struct OpticsCache {
-    scenes: Mutex<HashMap<String, Arc<Scene>>>,
-    prepared: Mutex<usize>,
+    scenes: MemoryLru<Scene>,
+    prepared: AtomicUsize,
+}
+
+impl Default for OpticsCache {
+    /// A cache of [`crate::lru::DEFAULT_BUDGET_BYTES`].
+    fn default() -> OpticsCache {
+        OpticsCache::with_budget(crate::lru::DEFAULT_BUDGET_BYTES)
+    }
 }
 
 impl OpticsCache {
+    pub fn with_budget(bytes: u64) -> OpticsCache {
+        OpticsCache { scenes: MemoryLru::new(bytes), prepared: AtomicUsize::new(0) }
+    }
+
     /// The optics of `atm` for `spectral`, prepared (on the current rayon
     /// pool, calling `on_step` after each wavelength) only if the cache does
     /// not hold them yet.
     pub fn get(&self, atm: &Atmosphere, spectral: &SpectralSettings, mie: &MieCache, on_step: &(dyn Fn() + Sync)) -> Arc<Scene> {
         let h = optics_hash(atm, spectral);
-        if let Some(s) = self.scenes.lock().unwrap().get(&h) {
-            return s.clone();
+        if let Some(s) = self.scenes.get(&h) {
+            return s;
         }
-        let scene = Arc::new(Scene::new(atm, spectral, mie, on_step));
-        *self.prepared.lock().unwrap() += 1;
-        self.scenes.lock().unwrap().entry(h).or_insert(scene).clone()
+        let scene = Scene::new(atm, spectral, mie, on_step);
+        self.prepared.fetch_add(1, Ordering::Relaxed);
+        let bytes = scene.encoded_bytes();
+        self.scenes.insert(h, Arc::new(scene), bytes)
     }
 
     /// How many times optics were prepared (not found in the cache).
     pub fn prepared(&self) -> usize {
-        *self.prepared.lock().unwrap()
+        self.prepared.load(Ordering::Relaxed)
+    }
+
+    /// Bytes of prepared optics held.
+    pub fn bytes(&self) -> u64 {
+        self.scenes.bytes()
+    }
+
+    /// Whether the cache holds these optics.
+    pub fn contains(&self, atm: &Atmosphere, spectral: &SpectralSettings) -> bool {
+        self.scenes.contains(&optics_hash(atm, spectral))
     }
 }
 
 /// One atmosphere and spectral setting with their prepared optics, and the
-/// workers and farm policy its views render with.
+/// workers and farm policy its views render with. The farm (its runtime,
+/// its worker connections, what optics each worker holds) is made at the
+/// first render and kept for the next views: a worker is greeted once and
+/// gets the optics at most once per session, however many views it renders.
 pub struct Session {
     pub atmosphere: Atmosphere,
-    bundle: Bundle,
     pub spectral: SpectralSettings,
     pub scene: Arc<Scene>,
+    /// The optics as they travel, under their hash.
+    optics: Arc<Optics>,
     workers: Vec<WorkerSpec>,
     options: Options,
+    farm: Mutex<Option<(tokio::runtime::Runtime, Farm)>>,
+}
+
+impl Drop for Session {
+    fn drop(&mut self) {
+        if let Some((rt, farm)) = self.farm.get_mut().ok().and_then(Option::take) {
+            drop(farm);
+            rt.shutdown_background();
+        }
+    }
 }
 
 /// A view's pixels as the farm delivered them.
@@ -84,25 +125,32 @@ impl Session {
         on_step: &(dyn Fn() + Sync),
     ) -> Session {
         let scene = cache.get(&atmosphere, &spectral, mie, on_step);
-        Session { atmosphere, bundle, spectral, scene, workers, options }
+        let optics = Arc::new(Optics::new(&atmosphere, bundle, scene.clone()));
+        Session { atmosphere, spectral, scene, optics, workers, options, farm: Mutex::new(None) }
+    }
+
+    /// The hash the session's optics travel under ([`optics_hash`]).
+    pub fn optics_hash(&self) -> &str {
+        &self.optics.hash
     }
 
     /// The farm job of a view (its hash names the journal's header).
     pub fn job(&self, view: &View) -> Arc<FarmJob> {
-        let settings = Settings { spectral: self.spectral.clone(), view: view.clone() };
-        let message = job::make(&self.bundle, &settings, Some(&self.scene));
-        Arc::new(FarmJob { hash: job::hash(&message), message, settings })
+        Arc::new(FarmJob::new(self.optics.clone(), view))
     }
 
     /// Renders one view of `job` (from [`Session::job`]), with columns of
     /// an earlier run already in `resumed` and new ones going to `journal`.
     pub fn render(&self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, cancel: Arc<AtomicBool>) -> Result<Rendered, FarmError> {
         let (width, height) = (job.settings.view.width, job.settings.view.height);
-        let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
-        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
-        let outcome: Result<Outcome, FarmError> = rt.block_on(coordinator::run(job, workers, Some(self.scene.clone()), resumed, journal, self.options.clone(), cancel));
-        rt.shutdown_background();
-        let outcome = outcome?;
+        let mut farm = self.farm.lock().unwrap_or_else(|e| e.into_inner());
+        if farm.is_none() {
+            let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
+            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
+            *farm = Some((rt, Farm::new(workers)));
+        }
+        let (rt, farm) = farm.as_mut().expect("made above");
+        let outcome: Outcome = rt.block_on(farm.render(job, resumed, journal, &self.options, cancel))?;
         let mut pixels = Vec::with_capacity(width * height);
         for y in 0..height {
             for col in &outcome.columns {

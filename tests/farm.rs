@@ -307,24 +307,38 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
         assert!(e.message().contains("missing farm token"), "{e}");
         // Another protocol version in a task.
         let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
-        let task = proto::RenderTask { protocol_version: 99, build_version: sky::farm::build_version(), job_hash: "x".into(), job: None, task_id: 1, first_column: 0, columns: 1 };
+        let pv = sky::farm::PROTOCOL_VERSION;
+        let task = proto::RenderTask { protocol_version: 99, build_version: sky::farm::build_version(), job_hash: "x".into(), task_id: 1, first_column: 0, columns: 1, ..Default::default() };
         let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::FailedPrecondition);
-        assert!(e.message().contains("farm protocol 1") && e.message().contains("protocol 99"), "{e}");
-        // An oversized message (a 70 MiB data file in a job).
-        let big =
-            proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), files: vec![proto::DataFile { name: "big.csv".into(), content: vec![b'1'; 70 << 20] }], ..Default::default() };
-        let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "x".into(), job: Some(big), task_id: 2, first_column: 0, columns: 1 };
+        assert!(e.message().contains(&format!("farm protocol {pv}")) && e.message().contains("protocol 99"), "{e}");
+        // An oversized message (a 70 MiB data file in the optics).
+        let big = proto::Optics {
+            protocol_version: pv,
+            build_version: sky::farm::build_version(),
+            files: vec![proto::DataFile { name: "big.csv".into(), content: vec![b'1'; 70 << 20] }],
+            ..Default::default()
+        };
+        let task = proto::RenderTask {
+            protocol_version: pv,
+            build_version: sky::farm::build_version(),
+            job_hash: "x".into(),
+            optics: Some(big),
+            task_id: 2,
+            first_column: 0,
+            columns: 1,
+            ..Default::default()
+        };
         let mut big_client = c.clone().max_encoding_message_size(usize::MAX);
         let e = big_client.render(task).await.expect_err("refused");
         assert!(matches!(e.code(), tonic::Code::ResourceExhausted | tonic::Code::OutOfRange | tonic::Code::InvalidArgument), "{e:?}");
         assert!(e.message().to_lowercase().contains("message") || e.message().contains("size") || e.message().contains("large"), "{e:?}");
-        // A job that does not match its hash.
-        let job = proto::Job { protocol_version: 1, build_version: sky::farm::build_version(), ..Default::default() };
-        let task = proto::RenderTask { protocol_version: 1, build_version: sky::farm::build_version(), job_hash: "not-its-hash".into(), job: Some(job), task_id: 3, first_column: 0, columns: 1 };
+        // A task whose optics and view do not match the job it claims.
+        let task =
+            proto::RenderTask { protocol_version: pv, build_version: sky::farm::build_version(), job_hash: "not-its-hash".into(), task_id: 3, first_column: 0, columns: 1, ..Default::default() };
         let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::InvalidArgument);
-        assert!(e.message().contains("hashes to"), "{e}");
+        assert!(e.message().contains("hash to"), "{e}");
     });
     // Garbage bytes on the port: the connection is dropped...
     let mut s = std::net::TcpStream::connect(&farm.workers[good].addr).unwrap();
@@ -343,7 +357,7 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
     // naming both versions, and a wrong token fails the render clearly.
     let o = farm.render("old.exr", &[old], &[]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("speaks farm protocol 99, this coordinator 1"), "{}", stderr(&o));
+    assert!(stderr(&o).contains(&format!("speaks farm protocol 99, this coordinator {}", sky::farm::PROTOCOL_VERSION)), "{}", stderr(&o));
     assert!(!farm.path("old.exr").exists());
     let mut args = render_args(&farm.path("tok.exr"));
     args.extend(["--workers".into(), farm.list(&[good]), "--token-file".into(), farm.path("wrong-token").to_str().unwrap().into()]);
@@ -415,25 +429,34 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
     let mut farm = Farm::new();
     let w = farm.start("w", &[]);
     // A long task: four directions at a million samples each.
-    let (_, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/analytic-hg.toml")).unwrap();
+    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let mut settings = sky::render::Settings::directions(vec![(60.0, 0.0), (70.0, 90.0), (80.0, 180.0), (85.0, 0.0)], 60.0, vec![], 1_000_000, 1, false);
     settings.spectral.xyz = true;
-    let job = sky::farm::job::make(&bundle, &settings, None);
-    let hash = sky::farm::job::hash(&job);
-    let task = |id: u64, job: Option<proto::Job>| proto::RenderTask {
+    // Optics without a prepared scene: the worker prepares them itself.
+    let optics = sky::farm::job::message(&bundle, &settings.spectral, None);
+    let optics_hash = sky::session::optics_hash(&atm, &settings.spectral);
+    let view_json = serde_json::to_string(&settings.view).unwrap();
+    let task = |id: u64, optics: Option<proto::Optics>| proto::RenderTask {
         protocol_version: sky::farm::PROTOCOL_VERSION,
         build_version: sky::farm::build_version(),
-        job_hash: hash.clone(),
-        job,
+        job_hash: sky::farm::job::job_hash(&optics_hash, &view_json),
         task_id: id,
         first_column: 0,
         columns: 4,
+        optics_hash: optics_hash.clone(),
+        optics,
+        view_json: view_json.clone(),
     };
     let uri = format!("http://{}", farm.workers[w].addr);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
         let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
-        let mut stream = c.render(task(1, Some(job.clone()))).await.unwrap().into_inner();
+        // Optics it lacks and the task does not carry: a typed NOT_FOUND.
+        let e = c.render(task(0, None)).await.expect_err("optics missing");
+        assert_eq!(e.code(), tonic::Code::NotFound);
+        let refusal = <proto::TaskRefusal as prost::Message>::decode(e.details()).unwrap();
+        assert_eq!(refusal.missing, proto::Missing::Optics as i32, "{e:?}");
+        let mut stream = c.render(task(1, Some(optics.clone()))).await.unwrap().into_inner();
         // Wait until it renders (past preparing the optics).
         loop {
             match stream.message().await.unwrap().unwrap().event {
@@ -461,7 +484,10 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
         assert!(e.message().contains("paused (rpc)"), "{e}");
         let r = c.control(ControlRequest { action: ControlAction::Resume as i32 }).await.unwrap().into_inner();
         assert_eq!(r.state, WorkerState::Idle as i32);
-        // Resumed, it takes the job again (it kept the prepared optics).
+        // Resumed, it takes the job again (it kept the prepared optics, and
+        // says so in its Hello).
+        let hello = proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+        assert_eq!(c.hello(hello).await.unwrap().into_inner().optics_held, vec![optics_hash.clone()]);
         let mut stream = c.render(task(3, None)).await.unwrap().into_inner();
         let first = stream.message().await.unwrap().unwrap();
         assert!(matches!(first.event, Some(Event::Heartbeat(_))));
@@ -566,5 +592,70 @@ impl Drop for Hogs {
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
+    }
+}
+
+/// A bake-shaped run: one atmosphere (the clear sky, whose optics weigh
+/// about 19 MB), 64 tiny views through one session over two workers. Each
+/// worker is connected and greeted once and gets the optics at most once;
+/// every view is bit-identical to a direct render. Prints the bytes each
+/// worker was sent against what protocol 1 sent (the job with its optics on
+/// the first task of every view): `cargo test --release --test farm
+/// a_bake -- --nocapture`.
+#[test]
+fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
+    use sky::farm::coordinator::{Options, WorkerSpec};
+    use sky::render::{camera::Camera, Settings, WavelengthSampling};
+    use sky::session::{OpticsCache, Session};
+    let mut farm = Farm::new();
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
+    let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
+    s.spectral.xyz = true;
+    s.spectral.wavelength_sampling = WavelengthSampling::Hero;
+    s.view.camera = Camera::Equirect;
+    (s.view.width, s.view.height) = (4, 4);
+    let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
+    let opts = Options { token: Some("s3cret-farm-token".into()), ..Options::default() };
+    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), workers, opts, &|| {});
+    let job = session.job(&s.view);
+    let optics_bytes = prost::Message::encoded_len(job.optics.message()) as u64;
+    let protocol1_job_bytes = optics_bytes + job.view_json.len() as u64;
+    assert!(optics_bytes > 10_000_000, "the clear sky's optics weigh {optics_bytes} bytes");
+    // Per worker (by address): connects, hellos, optics sent, their bytes,
+    // all request bytes, tasks, and the views it rendered in.
+    let mut totals: std::collections::BTreeMap<String, [u64; 7]> = Default::default();
+    for i in 0..64 {
+        let mut view = s.view.clone();
+        view.sun_zenith_deg = 1.0 + 1.4 * i as f64;
+        view.sun_azimuth_deg = (37 * i % 360) as f64;
+        let r = session.render_view(&view, Arc::new(AtomicBool::new(false))).unwrap_or_else(|e| panic!("view {i}: {e}"));
+        if i % 16 == 0 {
+            let want = sky::render::render(&session.scene, &view, &AtomicBool::new(false), &|| {}).unwrap();
+            assert!(r.image == want, "view {i}: the farm's render differs from a direct one");
+        }
+        for w in &r.stats.workers {
+            let t = totals.entry(w.address.clone()).or_default();
+            for (k, v) in [w.connects, w.hellos, w.optics_sent, w.optics_bytes, w.request_bytes, w.tasks_done, (w.tasks_done > 0) as u64].into_iter().enumerate() {
+                t[k] += v;
+            }
+        }
+    }
+    assert_eq!(totals.len(), 2);
+    eprintln!("64 views of {}x{} px, clear sky (optics {:.1} MB), 2 workers:", s.view.width, s.view.height, optics_bytes as f64 / 1e6);
+    for (addr, [connects, hellos, optics_sent, sent_optics_bytes, request_bytes, tasks, views]) in &totals {
+        eprintln!(
+            "  worker {addr}: {tasks} tasks in {views} views; {connects} connection, {hellos} hello; optics sent {optics_sent}x ({:.1} MB); all requests {:.2} MB (protocol 1: {:.0} MB, the job on the first task of each of its {views} views)",
+            *sent_optics_bytes as f64 / 1e6,
+            *request_bytes as f64 / 1e6,
+            (views * protocol1_job_bytes) as f64 / 1e6
+        );
+        assert!(*tasks > 0, "worker {addr} rendered nothing: {totals:?}");
+        assert_eq!((*connects, *hellos), (1, 1), "worker {addr} was connected or greeted again across the views");
+        assert_eq!(*optics_sent, 1, "worker {addr} got the optics {optics_sent} times");
+        assert_eq!(*sent_optics_bytes, optics_bytes);
+        // Everything but the one copy of the optics is small: views and headers.
+        assert!(*request_bytes < optics_bytes + 2_000 * tasks, "worker {addr}: {request_bytes} bytes for {tasks} tasks");
     }
 }

@@ -1,7 +1,7 @@
 //! Fuzzing the two places where `sky` reads input it did not write: the
 //! atmosphere loader (mutations of the shipped and the broken atmosphere
 //! files) and a worker's decoding and checking of farm messages (random
-//! and mutated jobs, tasks and tiles). No case may panic; every atmosphere
+//! and mutated optics, views, tasks and tiles). No case may panic; every atmosphere
 //! error names a line of its file, every farm error is a typed error.
 //!
 //! `make fuzz` runs the long versions (`--ignored`); the short ones run
@@ -290,7 +290,7 @@ fn text_that_is_not_utf8_is_located() {
 // --------------------------------------------------------- farm messages
 
 struct Valid {
-    job: proto::Job,
+    optics: proto::Optics,
     task: proto::RenderTask,
     tile: proto::Tile,
     height: u32,
@@ -299,27 +299,32 @@ struct Valid {
 }
 
 fn valid() -> Valid {
-    let (_, bundle) = Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
+    let (atm, bundle) = Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
     let settings = Settings::directions(vec![(10.0, 20.0), (60.0, 0.0), (80.0, 90.0)], 60.0, vec![450.0, 550.0], 8, 7, false);
-    let job = job::make(&bundle, &settings, None);
-    let hash = job::hash(&job);
+    let optics = job::message(&bundle, &settings.spectral, None);
+    let optics_hash = sky::session::optics_hash(&atm, &settings.spectral);
+    let view_json = serde_json::to_string(&settings.view).unwrap();
+    let hash = job::job_hash(&optics_hash, &view_json);
     let task = proto::RenderTask {
         protocol_version: sky::farm::PROTOCOL_VERSION,
         build_version: sky::farm::build_version(),
         job_hash: hash.clone(),
-        job: Some(job.clone()),
         task_id: 4,
         first_column: 1,
         columns: 2,
+        optics_hash,
+        optics: Some(optics.clone()),
+        view_json,
     };
     let px = |v: f64| PixelResult { xyz: [v, v, v], xyz_direct: [0.0; 3], xyz_stderr: [0.1; 3], spectral: vec![v, v], spectral_stderr: vec![0.01, 0.01], samples: 8, paths_cut: 0 };
     let tile = tile::encode(&hash, 4, 1, 1, 2, &[vec![px(1.0)], vec![px(2.0)]]);
-    Valid { job, task, tile, height: 1, lines: 2, spp: 8 }
+    Valid { optics, task, tile, height: 1, lines: 2, spp: 8 }
 }
 
-/// A worker's path for a task: the checks before it is taken, the job it
-/// carries unpacked (atmosphere, settings, prepared optics), its columns
-/// against the job's width. Errors are gRPC statuses with a message.
+/// A worker's path for a task: the checks before it is taken, its view
+/// and its columns against the view's width, the optics it carries
+/// unpacked (atmosphere, spectral settings, prepared scene) and checked
+/// against their hash. Errors are gRPC statuses with a message.
 fn worker_takes(task: &proto::RenderTask) -> Result<bool, String> {
     let status = |s: tonic::Status| -> Result<bool, String> {
         if s.message().trim().is_empty() || s.code() == tonic::Code::Ok || s.code() == tonic::Code::Unknown || s.code() == tonic::Code::Internal {
@@ -330,13 +335,17 @@ fn worker_takes(task: &proto::RenderTask) -> Result<bool, String> {
     if let Err(s) = worker::check_task(task, sky::farm::PROTOCOL_VERSION) {
         return status(s);
     }
-    let Some(j) = &task.job else { return Ok(false) };
-    match worker::open_job(j) {
+    let view = match worker::open_view(&task.view_json) {
+        Err(s) => return status(s),
+        Ok(v) => v,
+    };
+    if let Err(s) = worker::task_columns(task, view.width) {
+        return status(s);
+    }
+    let Some(o) = &task.optics else { return Ok(false) };
+    match worker::open_optics(o, &task.optics_hash) {
         Err(s) => status(s),
-        Ok((_, settings, _)) => match worker::task_columns(task, settings.view.width) {
-            Err(s) => status(s),
-            Ok(_) => Ok(false),
-        },
+        Ok(_) => Ok(false),
     }
 }
 
@@ -361,19 +370,21 @@ fn weird_u32(rng: &mut Rng) -> u32 {
     *rng.pick(&[0, 1, 2, 3, 4, u32::MAX, u32::MAX - 1, 1 << 31, any])
 }
 
-/// A structured mutation of a valid task: versions, hash, the job's
-/// fields (atmosphere text, data files, settings JSON, prepared optics),
-/// the columns. Half of the mutated jobs get their true hash, so that the
-/// worker looks inside them.
+/// A structured mutation of a valid task: versions, hashes, the view, the
+/// optics' fields (atmosphere text, data files, spectral settings JSON,
+/// prepared scene), the columns. Half of the mutated tasks get their true
+/// job hash, so that the worker looks inside them.
 fn mutate_task(v: &Valid, rng: &mut Rng) -> proto::RenderTask {
     let mut t = v.task.clone();
-    let mut j = v.job.clone();
+    let mut j = v.optics.clone();
     for _ in 0..1 + rng.below(3) {
-        match rng.below(10) {
+        match rng.below(12) {
             0 => t.protocol_version = weird_u32(rng),
             1 => t.build_version = String::from_utf8_lossy(&mutate(t.build_version.as_bytes(), rng)).into_owned(),
             2 => j.atmosphere_toml = String::from_utf8_lossy(&mutate(j.atmosphere_toml.as_bytes(), rng)).into_owned(),
-            3 => j.settings_json = String::from_utf8_lossy(&mutate(j.settings_json.as_bytes(), rng)).into_owned(),
+            3 => j.spectral_json = String::from_utf8_lossy(&mutate(j.spectral_json.as_bytes(), rng)).into_owned(),
+            10 => t.view_json = String::from_utf8_lossy(&mutate(t.view_json.as_bytes(), rng)).into_owned(),
+            11 => t.optics_hash = String::from_utf8_lossy(&rng.bytes(70)).into_owned(),
             4 if !j.files.is_empty() => {
                 let i = rng.below(j.files.len());
                 match rng.below(3) {
@@ -390,9 +401,9 @@ fn mutate_task(v: &Valid, rng: &mut Rng) -> proto::RenderTask {
         }
     }
     if rng.below(2) == 0 {
-        t.job_hash = job::hash(&j);
+        t.job_hash = job::job_hash(&t.optics_hash, &t.view_json);
     }
-    t.job = if rng.below(8) == 0 { None } else { Some(j) };
+    t.optics = if rng.below(8) == 0 { None } else { Some(j) };
     t
 }
 

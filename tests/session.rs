@@ -46,9 +46,10 @@ fn a_session_prepares_optics_once_for_many_views() {
     assert_eq!(cache.prepared(), 2);
 }
 
-/// What a farm job of one view weighs today: the prepared optics travel in
-/// every job, so a bake-shaped run (64 views of one atmosphere) sends 64
-/// copies to each worker that renders them. A figure for the farm's issue
+/// What a farm job of one view weighs: the optics and the view, as protocol
+/// 1 sent them with the first task of every view, so a bake-shaped run (64
+/// views of one atmosphere) sent 64 copies to each worker; protocol 2 sends
+/// the optics once (tests/farm.rs counts it). A figure for the farm's issue
 /// (`cargo test --release --test session -- --ignored --nocapture`).
 #[test]
 #[ignore = "a measurement: prints the bytes of one view's job for the shipped clear sky"]
@@ -63,6 +64,39 @@ fn job_bytes_per_view() {
     (s.view.width, s.view.height) = (32, 128);
     let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &MieCache::new(None), vec![], Options::default(), &|| {});
     let job = session.job(&s.view);
-    let bytes = job.message.encoded_len();
-    eprintln!("one view's job: {bytes} bytes ({:.1} MB; prepared optics {:.1} MB); 64 views: {:.0} MB per worker", bytes as f64 / 1e6, job.message.scene.len() as f64 / 1e6, 64.0 * bytes as f64 / 1e6);
+    let optics = job.optics.message();
+    let bytes = optics.encoded_len() + job.view_json.len();
+    eprintln!(
+        "one view's job: {bytes} bytes ({:.1} MB; prepared optics {:.1} MB); 64 views as protocol 1 sent them: {:.0} MB per worker",
+        bytes as f64 / 1e6,
+        optics.scene.len() as f64 / 1e6,
+        64.0 * bytes as f64 / 1e6
+    );
+}
+
+/// The session's optics cache is bounded by memory like a worker's: past
+/// its budget the least recently used optics nobody holds are evicted, and
+/// optics a session holds never are.
+#[test]
+fn the_optics_cache_is_bounded_by_memory() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("atmospheres/analytic-hg.toml");
+    let (atm, _) = Atmosphere::load_bundle(&path).unwrap();
+    let spectral = |nm: f64| Settings::directions(vec![], 40.0, vec![nm], 8, 3, false).spectral;
+    let (a, b, c) = (spectral(450.0), spectral(550.0), spectral(650.0));
+    let mie = MieCache::new(None);
+    // A budget smaller than any optics: only what is held stays.
+    let cache = OpticsCache::with_budget(1);
+    let held_a = cache.get(&atm, &a, &mie, &|| {});
+    let held_b = cache.get(&atm, &b, &mie, &|| {});
+    // Both held: both kept, over the budget.
+    assert!(cache.contains(&atm, &a) && cache.contains(&atm, &b));
+    assert_eq!(cache.bytes(), held_a.encoded_bytes() + held_b.encoded_bytes());
+    // Let a go: the next optics evict it, not the held b.
+    drop(held_a);
+    let _c = cache.get(&atm, &c, &mie, &|| {});
+    assert!(!cache.contains(&atm, &a) && cache.contains(&atm, &b) && cache.contains(&atm, &c));
+    assert_eq!(cache.prepared(), 3);
+    // b is still the very same optics.
+    assert!(Arc::ptr_eq(&held_b, &cache.get(&atm, &b, &mie, &|| {})));
+    assert_eq!(cache.prepared(), 3);
 }

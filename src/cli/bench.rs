@@ -166,17 +166,11 @@ fn spawn_worker(threads: usize, token: &str, name: &str) -> Result<BenchWorker> 
 }
 
 /// Times one farm render of `job` on `workers` (seconds).
-fn farm_seconds(
-    rt: &tokio::runtime::Runtime,
-    job: &std::sync::Arc<sky::farm::coordinator::FarmJob>,
-    workers: Vec<sky::farm::coordinator::WorkerSpec>,
-    scene: Option<std::sync::Arc<Scene>>,
-    token: &str,
-) -> Result<f64> {
+fn farm_seconds(rt: &tokio::runtime::Runtime, job: &std::sync::Arc<sky::farm::coordinator::FarmJob>, workers: Vec<sky::farm::coordinator::WorkerSpec>, token: &str) -> Result<f64> {
     use sky::farm::coordinator::{run, Options};
     let opts = Options { token: Some(token.to_string()), ..Options::default() };
     let t = Instant::now();
-    rt.block_on(run(job.clone(), workers, scene, Default::default(), None, opts, std::sync::Arc::new(AtomicBool::new(false))))?;
+    rt.block_on(run(job.clone(), workers, Default::default(), None, opts, std::sync::Arc::new(AtomicBool::new(false))))?;
     Ok(t.elapsed().as_secs_f64())
 }
 
@@ -406,7 +400,8 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         BenchCommand::Farm { atmosphere, size, spp, threads, rounds, json } => {
-            use sky::farm::coordinator::{FarmJob, WorkerSpec};
+            use sky::farm::coordinator::WorkerSpec;
+            use sky::farm::job::{FarmJob, Optics};
             use std::sync::Arc;
             let (w, h) = size.split_once('x').and_then(|(a, b)| Some((a.parse::<usize>().ok()?, b.parse::<usize>().ok()?))).context("--size WxH")?;
             let threads = threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
@@ -420,8 +415,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let cache = sky::mie::MieCache::from_env();
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
             let scene = Arc::new(pool.install(|| Scene::new(&atm, &settings.spectral, &cache, &|| {})));
-            let message = sky::farm::job::make(&bundle, &settings, Some(&scene));
-            let job = Arc::new(FarmJob { hash: sky::farm::job::hash(&message), message, settings: settings.clone() });
+            let job = Arc::new(FarmJob::new(Arc::new(Optics::new(&atm, bundle, scene.clone())), &settings.view));
             let token = format!("bench-{}", std::process::id());
             let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
             // Workers, warmed on the job (optics prepared and cached by hash).
@@ -430,7 +424,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             let one_b = spawn_worker(1, &token, "bench-1b")?;
             let remote = |w: &BenchWorker| WorkerSpec::Remote { name: None, uri: w.uri.clone() };
             for wk in [&big, &one_a, &one_b] {
-                farm_seconds(&rt, &job, vec![remote(wk)], None, &token)?;
+                farm_seconds(&rt, &job, vec![remote(wk)], &token)?;
             }
             // Rounds alternating the contenders; the fastest of each counts
             // (the usual robust statistic on a shared machine).
@@ -440,11 +434,11 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
                 let t = Instant::now();
                 pool.install(|| rend::render(&scene, &settings.view, &AtomicBool::new(false), &|| {})).map_err(|e| anyhow::anyhow!("{e}"))?;
                 t_plain = t_plain.min(t.elapsed().as_secs_f64());
-                t_embedded = t_embedded.min(farm_seconds(&rt, &job, vec![WorkerSpec::Local { threads }], Some(scene.clone()), &token)?);
-                t_remote = t_remote.min(farm_seconds(&rt, &job, vec![remote(&big)], None, &token)?);
+                t_embedded = t_embedded.min(farm_seconds(&rt, &job, vec![WorkerSpec::Local { threads }], &token)?);
+                t_remote = t_remote.min(farm_seconds(&rt, &job, vec![remote(&big)], &token)?);
                 // 2. Scaling: two single-thread workers against one.
-                t_one = t_one.min(farm_seconds(&rt, &job, vec![remote(&one_a)], None, &token)?);
-                t_two = t_two.min(farm_seconds(&rt, &job, vec![remote(&one_a), remote(&one_b)], None, &token)?);
+                t_one = t_one.min(farm_seconds(&rt, &job, vec![remote(&one_a)], &token)?);
+                t_two = t_two.min(farm_seconds(&rt, &job, vec![remote(&one_a), remote(&one_b)], &token)?);
             }
             drop(big);
             let v = json!({

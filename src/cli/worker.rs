@@ -47,6 +47,9 @@ pub struct WorkerArgs {
     /// Directory for cached Mie tables (default: $SKY_CACHE_DIR or the user cache)
     #[arg(long)]
     cache_dir: Option<PathBuf>,
+    /// Memory for prepared optics, MiB: the worker keeps the optics of recent atmospheres by hash (about 20 MB each for the clear sky) and evicts the least recently used beyond this
+    #[arg(long, default_value_t = sky::lru::DEFAULT_BUDGET_BYTES >> 20, value_parser = clap::value_parser!(u64).range(1..))]
+    optics_cache_mib: u64,
     /// Fault injection for the farm's tests: stall forever after N tasks
     #[arg(long, hide = true)]
     fault_stall_after: Option<u64>,
@@ -173,7 +176,7 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
     };
     let faults =
         Faults { stall_after_tasks: a.fault_stall_after, corrupt_tiles: a.fault_corrupt, perturb_tiles: a.fault_perturb, protocol_version: a.fault_protocol, sigkill_on_task: a.fault_sigkill_on_task };
-    let shared = Shared::new(Config { name: name.clone(), threads, token, faults, cache })?;
+    let shared = Shared::new(Config { name: name.clone(), threads, token, faults, cache, optics_budget: a.optics_cache_mib << 20 })?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     rt.block_on(serve(shared, addr, tls, a.schedule.clone(), a.owner_load_limit))
 }

@@ -77,7 +77,7 @@ mod tests {
     use super::*;
 
     fn worker(name: &str, state: &str, quarantined: Option<&str>) -> WorkerStats {
-        WorkerStats { name: name.into(), address: "h:1".into(), state: state.into(), tasks_done: 0, columns_done: 0, columns_per_s: 0.0, failures: 0, quarantined: quarantined.map(String::from) }
+        WorkerStats { name: name.into(), address: "h:1".into(), state: state.into(), quarantined: quarantined.map(String::from), ..Default::default() }
     }
 
     #[test]

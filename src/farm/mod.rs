@@ -3,14 +3,21 @@
 //! (the talk: "we distribute rendering tasks using multiple PCs", one
 //! column per task).
 //!
-//! - [`job`]: what travels to a worker (the atmosphere with its data files
-//!   and the render settings) and its hash;
+//! - [`job`]: what travels to a worker: optics (the atmosphere with its
+//!   data files, the spectral settings, the prepared scene) named by hash
+//!   and sent once, and a view with every task;
 //! - [`tile`]: rendered columns on the wire, and the checks a result must
 //!   pass before it is accepted;
 //! - [`journal`]: accepted columns on disk, so an interrupted render resumes;
 //! - [`worker`]: the gRPC service and the owner-first policies of a worker;
-//! - [`coordinator`]: leases, re-queues, duplicates, verification,
-//!   quarantine and progress, over remote workers or the embedded one.
+//! - [`scheduler`]: assignment, leases, duplicates, verification and
+//!   quarantine, with no network and no clock;
+//! - [`transport`]: the coordinator's side of the wire, one backend per
+//!   worker (remote, or the embedded one);
+//! - [`coordinator`]: drives the scheduler over the transport, keeps the
+//!   workers' connections across a session's views, reports progress;
+//! - [`protocol`]: what worker states and failures mean on the wire;
+//! - [`stats`]: what a render reports.
 
 pub mod config;
 pub mod coordinator;
@@ -18,7 +25,10 @@ pub mod events;
 pub mod job;
 pub mod journal;
 pub mod protocol;
+pub mod scheduler;
+pub mod stats;
 pub mod tile;
+pub mod transport;
 pub mod worker;
 
 /// The generated gRPC code (proto/sky/farm/v1/farm.proto).
@@ -28,14 +38,15 @@ pub mod proto {
 }
 
 /// The farm protocol's version: a worker and a coordinator must agree.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// The build a job needs: only the same build renders bit-identically.
 pub fn build_version() -> String {
     crate::VERSION.to_string()
 }
 
-/// The largest message a worker or coordinator accepts, bytes (a job with
-/// its data files is well under 8 MiB; a tile of 64 columns of a 4096-high
-/// image with 4 spectral lines is about 36 MiB).
+/// The largest message a worker or coordinator accepts, bytes (optics with
+/// their data files and prepared scene are about 20 MB for the clear sky;
+/// a tile of 64 columns of a 4096-high image with 4 spectral lines is about
+/// 36 MiB).
 pub const MAX_MESSAGE_BYTES: usize = 64 << 20;

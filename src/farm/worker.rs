@@ -8,9 +8,9 @@
 use super::proto::worker_server::{Worker, WorkerServer};
 use super::proto::{self, ControlAction, WorkerState};
 use super::{job, tile, MAX_MESSAGE_BYTES, PROTOCOL_VERSION};
+use crate::lru::MemoryLru;
 use crate::mie::MieCache;
-use crate::render::{self, Scene, Settings};
-use std::collections::VecDeque;
+use crate::render::{self, Scene, SpectralSettings, View};
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -71,14 +71,17 @@ pub struct Config {
     pub token: String,
     pub faults: Faults,
     pub cache: MieCache,
+    /// The most bytes of prepared optics kept (least recently used evicted
+    /// first; optics a running task uses never).
+    pub optics_budget: u64,
 }
 
 /// The worker's shared state.
 pub struct Shared {
     pub config: Config,
     pool: rayon::ThreadPool,
-    /// Prepared jobs, most recent last (two kept).
-    scenes: Mutex<VecDeque<(String, Arc<(Scene, Settings)>)>>,
+    /// Prepared optics by optics hash, bounded by `config.optics_budget`.
+    optics: MemoryLru<Scene>,
     pause: Mutex<PauseState>,
     /// True while paused; running tasks watch it.
     paused_tx: watch::Sender<bool>,
@@ -95,9 +98,9 @@ impl Shared {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(config.threads).thread_name(|i| format!("sky-worker-{i}")).build()?;
         let (paused_tx, _) = watch::channel(false);
         Ok(Arc::new(Shared {
+            optics: MemoryLru::new(config.optics_budget),
             config,
             pool,
-            scenes: Mutex::new(VecDeque::new()),
             pause: Mutex::new(PauseState::default()),
             paused_tx,
             turn: tokio::sync::Mutex::new(()),
@@ -142,17 +145,14 @@ impl Shared {
         self.config.faults.protocol_version.unwrap_or(PROTOCOL_VERSION)
     }
 
-    fn scene(&self, hash: &str) -> Option<Arc<(Scene, Settings)>> {
-        self.scenes.lock().unwrap().iter().find(|(h, _)| h == hash).map(|(_, s)| s.clone())
+    /// The optics hashes held now, most recently used first.
+    pub fn optics_held(&self) -> Vec<String> {
+        self.optics.keys()
     }
 
-    fn keep_scene(&self, hash: String, scene: Arc<(Scene, Settings)>) {
-        let mut s = self.scenes.lock().unwrap();
-        s.retain(|(h, _)| *h != hash);
-        s.push_back((hash, scene));
-        while s.len() > 2 {
-            s.pop_front();
-        }
+    /// Bytes of prepared optics held now.
+    pub fn optics_bytes(&self) -> u64 {
+        self.optics.bytes()
     }
 }
 
@@ -183,6 +183,7 @@ impl Worker for Service {
             threads: s.config.threads as u32,
             state: s.state() as i32,
             paused_reason: s.paused_reason().unwrap_or_default(),
+            optics_held: s.optics_held(),
         }))
     }
 
@@ -220,10 +221,13 @@ impl Worker for Service {
             eprintln!("sky worker {}: stalling on task {} (fault injection)", s.config.name, task.task_id);
             return Ok(Response::new(Box::pin(tokio_stream::pending())));
         }
-        // The job: known already, or carried by the task.
-        let prepared = s.scene(&task.job_hash);
-        if prepared.is_none() && task.job.is_none() {
-            return Err(Status::not_found(format!("job {} is unknown to this worker; send it with the task", task.job_hash)));
+        // The view travels with every task; the optics are held already or
+        // carried by the task.
+        let view = open_view(&task.view_json)?;
+        task_columns(&task, view.width)?;
+        let prepared = s.optics.get(&task.optics_hash);
+        if prepared.is_none() && task.optics.is_none() {
+            return Err(super::protocol::optics_missing_status(&task.optics_hash));
         }
         if s.config.faults.sigkill_on_task == Some(started) {
             eprintln!("sky worker {}: killing itself mid-task (fault injection)", s.config.name);
@@ -238,7 +242,7 @@ impl Worker for Service {
         }
         let (tx, rx) = mpsc::channel::<Result<proto::RenderEvent, Status>>(8);
         tokio::spawn(async move {
-            let result = run_task(&s, task, prepared, &tx).await;
+            let result = run_task(&s, task, view, prepared, &tx).await;
             match result {
                 Ok(t) => {
                     let _ = tx.send(Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) })).await;
@@ -256,8 +260,8 @@ impl Worker for Service {
 }
 
 /// The checks a task passes before a worker takes it: the farm protocol
-/// (`protocol_version`, this worker's), the build, and the hash of the job
-/// it carries, if any.
+/// (`protocol_version`, this worker's), the build, and the job hash it
+/// claims (of its optics hash and view).
 pub fn check_task(task: &proto::RenderTask, protocol_version: u32) -> Result<(), Status> {
     if task.protocol_version != protocol_version {
         return Err(Status::failed_precondition(format!("this worker speaks farm protocol {protocol_version}, the task protocol {}", task.protocol_version)));
@@ -265,34 +269,36 @@ pub fn check_task(task: &proto::RenderTask, protocol_version: u32) -> Result<(),
     if task.build_version != super::build_version() {
         return Err(Status::failed_precondition(format!("this worker is sky {}, the task is from sky {}: only the same build renders bit-identically", super::build_version(), task.build_version)));
     }
-    if let Some(j) = &task.job {
-        let h = job::hash(j);
-        if h != task.job_hash {
-            return Err(Status::invalid_argument(format!("the task's job hashes to {h}, not the {} it claims", task.job_hash)));
-        }
+    let h = job::job_hash(&task.optics_hash, &task.view_json);
+    if h != task.job_hash {
+        return Err(Status::invalid_argument(format!("the task's optics and view hash to {h}, not the job {} it claims", task.job_hash)));
     }
     Ok(())
 }
 
-/// Unpacks a job a task carries: the atmosphere (from the job's own
-/// files), the settings, and the prepared optics if it has them.
-pub fn open_job(j: &proto::Job) -> Result<(crate::atmosphere::Atmosphere, Settings, Option<Scene>), Status> {
-    let (atm, settings) = job::open(j).map_err(|e| Status::invalid_argument(e.to_string()))?;
-    let scene = job::scene(j).map_err(|e| Status::invalid_argument(e.to_string()))?;
-    Ok((atm, settings, scene))
+/// Unpacks optics a task carries: the atmosphere (from their own files),
+/// the spectral settings and the prepared scene if they have it, checked
+/// against the optics hash the task names.
+pub fn open_optics(o: &proto::Optics, optics_hash: &str) -> Result<(crate::atmosphere::Atmosphere, SpectralSettings, Option<Scene>), Status> {
+    job::open_optics(o, optics_hash).map_err(|e| Status::invalid_argument(e.to_string()))
 }
 
-/// The task's columns, checked against the job's width.
+/// Unpacks the view a task carries.
+pub fn open_view(view_json: &str) -> Result<View, Status> {
+    job::open_view(view_json).map_err(|e| Status::invalid_argument(e.to_string()))
+}
+
+/// The task's columns, checked against the view's width.
 pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, usize), Status> {
     let (first, count) = (task.first_column as usize, task.columns as usize);
     if count == 0 || first + count > width {
-        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the job's {width} columns")));
+        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the view's {width} columns")));
     }
     Ok((first, count))
 }
 
 /// Runs one task to its tile, heartbeating through `tx`.
-async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc<(Scene, Settings)>>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
+async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared: Option<Arc<Scene>>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
     let mut paused = s.paused_tx.subscribe();
     let cancel = Arc::new(AtomicBool::new(false));
     let pixels = Arc::new(AtomicU64::new(0));
@@ -315,35 +321,41 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
         }
     }
     let _not_busy = NotBusy(s);
-    // Prepare the job's optics if needed.
-    let scene = match prepared {
+    // Unpack (or prepare) the optics if the worker lacks them; optics
+    // another task brought meanwhile are taken as they are.
+    let scene = match prepared.or_else(|| s.optics.get(&task.optics_hash)) {
         Some(p) => p,
         None => {
-            let j = task.job.clone().expect("checked by the caller");
+            let (o, hash) = (task.optics.clone().expect("checked by the caller"), task.optics_hash.clone());
             let shared = s.clone();
-            let work = tokio::task::spawn_blocking(move || -> Result<Arc<(Scene, Settings)>, Status> {
-                let (atm, settings, scene) = open_job(&j)?;
-                let scene = match scene {
-                    Some(s) => s,
-                    None => shared.pool.install(|| Scene::new(&atm, &settings.spectral, &shared.config.cache, &|| {})),
+            // Kept even if the task is cancelled meanwhile: the coordinator
+            // counts them as sent.
+            let work = tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
+                let (atm, spectral, scene) = open_optics(&o, &hash)?;
+                let (scene, bytes) = match scene {
+                    Some(s) => (s, o.scene.len() as u64),
+                    None => {
+                        let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
+                        let bytes = s.encoded_bytes();
+                        (s, bytes)
+                    }
                 };
-                Ok(Arc::new((scene, settings)))
+                Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
             });
-            let scene = match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
+            match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
                 Ok(r) => r?,
-                Err(e) => return Err(Status::internal(format!("preparing the job panicked: {e}"))),
-            };
-            s.keep_scene(task.job_hash.clone(), scene.clone());
-            scene
+                Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
+            }
         }
     };
-    let settings = &scene.1;
-    let (first, count) = task_columns(&task, settings.view.width)?;
+    let (first, count) = task_columns(&task, view.width)?;
+    let lines = scene.spectral.spectral_nm.len();
+    let height = view.height as u32;
     let work = {
         let (s2, scene, cancel, pixels) = (s.clone(), scene.clone(), cancel.clone(), pixels.clone());
         tokio::task::spawn_blocking(move || {
             s2.pool.install(|| {
-                render::render_columns(&scene.0, &scene.1.view, first, count, &cancel, &|| {
+                render::render_columns(&scene, &view, first, count, &cancel, &|| {
                     pixels.fetch_add(1, Ordering::Relaxed);
                 })
             })
@@ -355,7 +367,7 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, prepared: Option<Arc
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };
-    let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, settings.view.height as u32, settings.spectral.spectral_nm.len(), &columns);
+    let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, height, lines, &columns);
     if s.config.faults.corrupt_tiles {
         t.values[0] = f64::NAN;
     }

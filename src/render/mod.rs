@@ -194,6 +194,18 @@ impl Scene {
         Scene { medium, columns, bands, band_optics, line_optics, sun_angular_diameter_deg: atm.sun.angular_diameter_deg, spectral: s.clone() }
     }
 
+    /// The size of the encoded scene, bytes: what it weighs on the wire, and
+    /// about what it holds in memory (its tables are `f64`s either way).
+    pub fn encoded_bytes(&self) -> u64 {
+        struct Count(u64);
+        impl Extend<u8> for Count {
+            fn extend<I: IntoIterator<Item = u8>>(&mut self, bytes: I) {
+                self.0 += bytes.into_iter().count() as u64;
+            }
+        }
+        postcard::to_extend(self, Count(0)).map(|c| c.0).expect("scenes serialise")
+    }
+
     /// How many wavelengths `new` evaluates (for a progress bar).
     pub fn steps(atm: &Atmosphere, s: &SpectralSettings) -> usize {
         let b = if s.xyz { Bands::new(atm, s.band_nm, s.wavelength_sampling).len() } else { 0 };

@@ -1,0 +1,585 @@
+//! The farm's scheduler: which worker renders which columns, leases,
+//! duplicates of slow tasks, verification and quarantine. It does no I/O
+//! but the journal's and reads no clock: time enters as `now` (time since
+//! the render began), heartbeats as calls, so the tests below drive it
+//! deterministically. The coordinator ([`super::coordinator`]) runs it over
+//! the transport.
+//!
+//! - A task whose runner is not heard from for a lease goes back to the
+//!   queue ([`Sched::expire`]); so does a task whose worker fails or
+//!   pauses ([`Sched::release`], [`Sched::blame`]).
+//! - Once the queue is empty, an idle worker duplicates the oldest task in
+//!   flight; the first valid tile wins and the other runner is stopped.
+//! - `verify_fraction` of the columns are rendered again on a different
+//!   worker and compared bit for bit; on a mismatch a third worker decides,
+//!   and the one that disagrees with the other two is quarantined and every
+//!   column it produced rendered again (with no third worker, the second
+//!   is trusted over the first).
+//! - A column that fails on `max_column_failures` different workers fails
+//!   the render with a report; a worker that fails `max_worker_failures`
+//!   tasks, or refuses the job (versions, token), is quarantined.
+
+use super::coordinator::Options;
+use super::events::FarmEvent;
+use super::journal::Journal;
+use super::protocol::TaskError;
+pub use super::stats::{FarmError, Outcome, Stats, Traffic, WorkerStats};
+use super::tile;
+use crate::render::PixelResult;
+use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::watch;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Kind {
+    Render,
+    /// A second (or third) rendering of a column: an entry of `checks`.
+    Verify {
+        check: u64,
+    },
+}
+
+/// A column to render again on another worker and compare bit for bit.
+#[derive(Debug, Clone)]
+struct Check {
+    column: u32,
+    producer: usize,
+    /// Workers that may not take it (the producer, a disputing verifier).
+    excluded: Vec<usize>,
+    /// A verifier whose result differed from the producer's, and its
+    /// result: a third worker decides which of the two is wrong.
+    disputed: Option<(usize, Vec<PixelResult>)>,
+}
+
+/// Why a runner should stop (what its [`Assignment::stop`] says).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Stop {
+    Run,
+    /// Another runner delivered the task first (or the render ended).
+    Lost,
+    /// Not heard from for a lease: the task went back to the queue and the
+    /// failure is counted already.
+    Expired,
+}
+
+struct Runner {
+    worker: usize,
+    started: Duration,
+    heard: Duration,
+    stop: watch::Sender<Stop>,
+}
+
+struct Task {
+    first: u32,
+    count: u32,
+    kind: Kind,
+    runners: Vec<Runner>,
+}
+
+/// A task as one runner gets it.
+#[derive(Clone)]
+pub(crate) struct Assignment {
+    pub id: u64,
+    pub first: u32,
+    pub count: u32,
+    pub stop: watch::Receiver<Stop>,
+}
+
+pub(crate) enum Assign {
+    Task(Assignment),
+    Wait,
+    Done,
+}
+
+/// One worker as the scheduler sees it.
+pub(crate) struct WState {
+    pub name: String,
+    pub address: String,
+    pub state: String,
+    pub failures: usize,
+    pub tasks_done: u64,
+    pub columns_done: u64,
+    /// Columns per second, smoothed.
+    pub speed: Option<f64>,
+    pub quarantined: Option<String>,
+    /// Pixels of the current task finished so far (from heartbeats).
+    pub inflight_pixels: Arc<AtomicU64>,
+    /// Whether the worker is still preparing the job's optics.
+    pub preparing: Arc<AtomicBool>,
+    pub traffic: Arc<Traffic>,
+}
+
+impl WState {
+    /// A worker about to connect, or quarantined (by an earlier view).
+    pub fn new(name: String, address: String, quarantined: Option<String>) -> WState {
+        WState {
+            name,
+            address,
+            state: if quarantined.is_some() { "quarantined".into() } else { "connecting".into() },
+            failures: 0,
+            tasks_done: 0,
+            columns_done: 0,
+            speed: None,
+            quarantined,
+            inflight_pixels: Arc::new(AtomicU64::new(0)),
+            preparing: Arc::new(AtomicBool::new(false)),
+            traffic: Arc::new(Traffic::default()),
+        }
+    }
+}
+
+/// One render's scheduling state.
+pub(crate) struct Sched {
+    width: u32,
+    pub height: u32,
+    lines: u32,
+    job_hash: String,
+    columns: Vec<Option<Vec<PixelResult>>>,
+    producer: Vec<Option<usize>>,
+    pending: BTreeSet<u32>,
+    tasks: BTreeMap<u64, Task>,
+    verify_queue: VecDeque<u64>,
+    checks: BTreeMap<u64, Check>,
+    next_check: u64,
+    column_failures: HashMap<u32, BTreeMap<usize, String>>,
+    pub workers: Vec<WState>,
+    next_id: u64,
+    /// Why the render failed, once it has.
+    pub fatal: Option<FarmError>,
+    journal: Option<Journal>,
+    pub stats: Stats,
+    opts: Options,
+}
+
+impl Sched {
+    /// A render of `width` columns of `height` pixels with `lines`
+    /// spectral lines, named `job_hash`; `columns` holds those already
+    /// rendered (from a journal), `journal` receives the accepted ones.
+    pub fn new(job_hash: &str, height: u32, lines: u32, columns: Vec<Option<Vec<PixelResult>>>, workers: Vec<WState>, journal: Option<Journal>, opts: Options) -> Sched {
+        let width = columns.len() as u32;
+        let resumed = columns.iter().filter(|c| c.is_some()).count() as u32;
+        let pending = (0..width).filter(|&c| columns[c as usize].is_none()).collect();
+        let mut s = Sched {
+            width,
+            height,
+            lines,
+            job_hash: job_hash.to_string(),
+            columns,
+            producer: vec![None; width as usize],
+            pending,
+            tasks: BTreeMap::new(),
+            verify_queue: VecDeque::new(),
+            checks: BTreeMap::new(),
+            next_check: 1,
+            column_failures: HashMap::new(),
+            workers,
+            next_id: 1,
+            fatal: None,
+            journal,
+            stats: Stats { columns_total: width, columns_resumed: resumed, ..Default::default() },
+            opts,
+        };
+        if s.live_workers() == 0 && !s.complete() {
+            s.fatal = Some(FarmError::NoWorkers { report: s.report() });
+        }
+        s
+    }
+
+    pub fn live_workers(&self) -> usize {
+        self.workers.iter().filter(|w| w.quarantined.is_none()).count()
+    }
+
+    /// Every column rendered (and verified, where picked), nothing running.
+    pub fn complete(&self) -> bool {
+        self.pending.is_empty() && self.tasks.is_empty() && self.verify_queue.is_empty() && self.columns.iter().all(Option::is_some)
+    }
+
+    /// Each worker's state and failures, for an error message.
+    pub fn report(&self) -> String {
+        let mut s = String::new();
+        for w in &self.workers {
+            s.push_str(&format!("  {}: {} ({} failures{})\n", w.name, w.state, w.failures, w.quarantined.as_ref().map(|q| format!("; quarantined: {q}")).unwrap_or_default()));
+        }
+        s
+    }
+
+    /// Columns a worker should take at once: about `task_seconds` of its
+    /// measured speed, and no more than its share of what is left.
+    fn batch(&self, w: usize) -> u32 {
+        let by_speed = match self.workers[w].speed {
+            None => 1.0,
+            Some(v) => (v * self.opts.task_seconds).round().max(1.0),
+        };
+        let share = (self.pending.len() as f64 / (2.0 * self.live_workers().max(1) as f64)).ceil().max(1.0);
+        by_speed.min(share).min(self.opts.max_batch as f64).max(1.0) as u32
+    }
+
+    fn runner(&mut self, w: usize, now: Duration) -> (Runner, watch::Receiver<Stop>) {
+        let (tx, rx) = watch::channel(Stop::Run);
+        self.workers[w].inflight_pixels.store(0, Ordering::Relaxed);
+        (Runner { worker: w, started: now, heard: now, stop: tx }, rx)
+    }
+
+    fn new_task(&mut self, w: usize, first: u32, count: u32, kind: Kind, now: Duration) -> Assign {
+        let id = self.next_id;
+        self.next_id += 1;
+        let (runner, stop) = self.runner(w, now);
+        self.tasks.insert(id, Task { first, count, kind, runners: vec![runner] });
+        self.stats.tasks += 1;
+        Assign::Task(Assignment { id, first, count, stop })
+    }
+
+    /// Work for worker `w` at `now`: a verification it may take, else a
+    /// batch of pending columns, else a duplicate of the oldest task
+    /// running on another worker; Wait if none, Done once the render is
+    /// over for it.
+    pub fn assign(&mut self, w: usize, now: Duration) -> Assign {
+        if self.fatal.is_some() || self.workers[w].quarantined.is_some() {
+            return Assign::Done;
+        }
+        // Verifications no live worker but the producer could take are dropped.
+        let live: Vec<usize> = (0..self.workers.len()).filter(|&i| self.workers[i].quarantined.is_none()).collect();
+        let before = self.verify_queue.len();
+        let checks = &self.checks;
+        let mut unresolved = Vec::new();
+        self.verify_queue.retain(|id| {
+            let c = &checks[id];
+            let ok = live.iter().any(|i| !c.excluded.contains(i));
+            if !ok {
+                unresolved.push(*id);
+            }
+            ok
+        });
+        self.stats.columns_unverified += (before - self.verify_queue.len()) as u32;
+        for id in unresolved {
+            // A dispute no third worker can settle: trust the verifier over
+            // the producer (the column is rendered again by someone else).
+            let c = self.checks.remove(&id).unwrap();
+            if let Some((v, _)) = c.disputed {
+                let why = format!("column {} differed bit for bit from {}'s, and no third worker could decide", c.column, self.workers[v].name);
+                self.convict(c.producer, why);
+            }
+        }
+        if self.complete() {
+            return Assign::Done;
+        }
+        if let Some(pos) = self.verify_queue.iter().position(|id| !self.checks[id].excluded.contains(&w)) {
+            let id = self.verify_queue.remove(pos).unwrap();
+            let column = self.checks[&id].column;
+            return self.new_task(w, column, 1, Kind::Verify { check: id }, now);
+        }
+        if let Some(&start) = self.pending.iter().next() {
+            let n = self.batch(w);
+            let mut count = 0;
+            while count < n && self.pending.contains(&(start + count)) {
+                self.pending.remove(&(start + count));
+                count += 1;
+            }
+            return self.new_task(w, start, count, Kind::Render, now);
+        }
+        // Nothing new: duplicate the oldest task running on someone else.
+        let oldest = self.tasks.iter().filter(|(_, t)| t.kind == Kind::Render && t.runners.len() == 1 && t.runners[0].worker != w).min_by_key(|(_, t)| t.runners[0].started).map(|(&id, _)| id);
+        if let Some(id) = oldest {
+            let (runner, stop) = self.runner(w, now);
+            let t = self.tasks.get_mut(&id).unwrap();
+            t.runners.push(runner);
+            let a = Assignment { id, first: t.first, count: t.count, stop };
+            self.stats.duplicates += 1;
+            return Assign::Task(a);
+        }
+        Assign::Wait
+    }
+
+    fn picked_for_verification(&self, column: u32) -> bool {
+        if self.opts.verify_fraction <= 0.0 {
+            return false;
+        }
+        let h = blake3::hash(format!("{}:{column}", self.job_hash).as_bytes());
+        let u = u64::from_le_bytes(h.as_bytes()[..8].try_into().unwrap()) as f64 / u64::MAX as f64;
+        u < self.opts.verify_fraction
+    }
+
+    pub fn quarantine(&mut self, w: usize, why: String) {
+        if self.workers[w].quarantined.is_some() {
+            return;
+        }
+        if let Some(e) = &self.opts.events {
+            e.emit(&FarmEvent::Quarantined { worker: self.workers[w].name.clone(), why: why.clone() });
+        }
+        self.workers[w].quarantined = Some(why);
+        self.workers[w].state = "quarantined".into();
+        if self.live_workers() == 0 && !self.complete() && self.fatal.is_none() {
+            self.fatal = Some(FarmError::NoWorkers { report: self.report() });
+        }
+    }
+
+    /// Worker `w` sent a heartbeat (or any message) for task `id` at `now`.
+    pub fn heard(&mut self, w: usize, id: u64, now: Duration) {
+        if let Some(r) = self.tasks.get_mut(&id).and_then(|t| t.runners.iter_mut().find(|r| r.worker == w)) {
+            r.heard = r.heard.max(now);
+        }
+    }
+
+    /// Takes off their tasks the runners not heard from for a lease at
+    /// `now` (each counted as a failure of its worker; a task left without
+    /// runners goes back to the queue), tells them to stop, and returns
+    /// their workers.
+    pub fn expire(&mut self, now: Duration) -> Vec<usize> {
+        let lease = self.opts.lease;
+        let late: Vec<(u64, usize)> = self.tasks.iter().flat_map(|(&id, t)| t.runners.iter().filter(|r| now.saturating_sub(r.heard) > lease).map(move |r| (id, r.worker))).collect();
+        for &(id, w) in &late {
+            let t = &self.tasks[&id];
+            let (first, count, render) = (t.first, t.count, t.kind == Kind::Render);
+            if let Some(r) = t.runners.iter().find(|r| r.worker == w) {
+                r.stop.send_replace(Stop::Expired);
+            }
+            self.release(w, id, false);
+            self.blame(w, TaskError::Failed(format!("silent for the lease of {lease:?} (stalled or gone)")), render.then_some((first, count)));
+        }
+        late.into_iter().map(|(_, w)| w).collect()
+    }
+
+    /// Whether task `id` renders columns (not a verification); true for a
+    /// task no longer running.
+    pub fn is_render(&self, id: u64) -> bool {
+        self.tasks.get(&id).is_none_or(|t| t.kind == Kind::Render)
+    }
+
+    /// Worker `w` delivered task `id` at `now` (its tile already checked):
+    /// the first runner to deliver wins, the others are stopped.
+    pub fn finish(&mut self, w: usize, id: u64, columns: Vec<Vec<PixelResult>>, now: Duration) {
+        let Some(task) = self.tasks.get(&id) else { return };
+        let Some(started) = task.runners.iter().find(|r| r.worker == w).map(|r| r.started) else { return };
+        let task = self.tasks.remove(&id).unwrap();
+        for r in &task.runners {
+            r.stop.send_replace(Stop::Lost);
+        }
+        let ws = &mut self.workers[w];
+        ws.tasks_done += 1;
+        ws.columns_done += task.count as u64;
+        let rate = task.count as f64 / now.saturating_sub(started).as_secs_f64().max(1e-3);
+        ws.speed = Some(match ws.speed {
+            None => rate,
+            Some(v) => 0.5 * v + 0.5 * rate,
+        });
+        match task.kind {
+            Kind::Render => {
+                let mut accepted = Vec::new();
+                for (i, col) in columns.into_iter().enumerate() {
+                    let c = task.first + i as u32;
+                    if self.columns[c as usize].is_some() {
+                        continue;
+                    }
+                    accepted.push(tile::encode(&self.job_hash, 0, c, self.height, self.lines as usize, std::slice::from_ref(&col)));
+                    self.stats.samples_rendered += col.iter().map(|p| p.samples as u64).sum::<u64>();
+                    self.columns[c as usize] = Some(col);
+                    self.producer[c as usize] = Some(w);
+                    self.stats.columns_rendered += 1;
+                    if self.picked_for_verification(c) {
+                        self.add_check(Check { column: c, producer: w, excluded: vec![w], disputed: None }, false);
+                    }
+                }
+                if let Some(j) = &mut self.journal {
+                    if let Err(e) = j.append_columns(&accepted) {
+                        self.fatal = Some(e.into());
+                    }
+                }
+            }
+            Kind::Verify { check } => {
+                let Some(chk) = self.checks.remove(&check) else { return };
+                let c = chk.column;
+                // The producer may have been caught meanwhile (its columns
+                // are being rendered again): nothing left to check.
+                if self.producer[c as usize] != Some(chk.producer) {
+                    return;
+                }
+                let Some(mine) = columns.into_iter().next() else { return };
+                let stored = self.columns[c as usize].clone().expect("a produced column");
+                match chk.disputed {
+                    None if bitwise_equal(&stored, &mine) => self.stats.columns_verified += 1,
+                    None => {
+                        self.stats.verify_mismatches += 1;
+                        let third = (0..self.workers.len()).any(|i| self.workers[i].quarantined.is_none() && i != chk.producer && i != w);
+                        if third {
+                            // Two opinions differ: a third worker decides.
+                            self.add_check(Check { column: c, producer: chk.producer, excluded: vec![chk.producer, w], disputed: Some((w, mine)) }, true);
+                        } else {
+                            let why = format!("column {c} differed bit for bit when {} rendered it again (no third worker to decide)", self.workers[w].name);
+                            self.convict(chk.producer, why);
+                        }
+                    }
+                    Some((v, theirs)) => {
+                        let name = self.workers[w].name.clone();
+                        if bitwise_equal(&stored, &mine) {
+                            self.stats.columns_verified += 1;
+                            let why = format!("its rendering of column {c} differed bit for bit from those of {} and {name}", self.workers[chk.producer].name);
+                            self.convict(v, why);
+                        } else if bitwise_equal(&theirs, &mine) {
+                            let why = format!("its column {c} differed bit for bit from those of {} and {name}", self.workers[v].name);
+                            self.convict(chk.producer, why);
+                        } else {
+                            let why = format!("three different renderings of column {c} ({name} was the third)");
+                            self.convict(chk.producer, why.clone());
+                            self.convict(v, why);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    fn add_check(&mut self, c: Check, urgent: bool) {
+        let id = self.next_check;
+        self.next_check += 1;
+        self.checks.insert(id, c);
+        if urgent {
+            self.verify_queue.push_front(id);
+        } else {
+            self.verify_queue.push_back(id);
+        }
+    }
+
+    /// Quarantines a worker caught with a wrong result and renders again
+    /// every column it produced.
+    fn convict(&mut self, w: usize, why: String) {
+        self.quarantine(w, why);
+        let mine: Vec<u32> = (0..self.width).filter(|&i| self.producer[i as usize] == Some(w)).collect();
+        for i in mine {
+            self.columns[i as usize] = None;
+            self.producer[i as usize] = None;
+            self.pending.insert(i);
+            self.stats.columns_rendered -= 1;
+            if let Some(j) = &mut self.journal {
+                if let Err(e) = j.retract(i) {
+                    self.fatal = Some(e.into());
+                }
+            }
+        }
+        let checks = &self.checks;
+        self.verify_queue.retain(|id| checks[id].producer != w);
+        self.checks.retain(|_, c| c.producer != w);
+    }
+
+    /// Takes worker `w` off task `id`; the last runner to leave puts the
+    /// task back in the queue.
+    pub fn release(&mut self, w: usize, id: u64, cancelled: bool) {
+        let Some(task) = self.tasks.get_mut(&id) else { return };
+        task.runners.retain(|r| r.worker != w);
+        if !task.runners.is_empty() {
+            return;
+        }
+        let task = self.tasks.remove(&id).unwrap();
+        match task.kind {
+            Kind::Render => {
+                for c in task.first..task.first + task.count {
+                    if self.columns[c as usize].is_none() {
+                        self.pending.insert(c);
+                    }
+                }
+            }
+            Kind::Verify { check } => {
+                if self.checks.contains_key(&check) {
+                    self.verify_queue.push_front(check);
+                }
+            }
+        }
+        if !cancelled {
+            self.stats.requeued += 1;
+        }
+    }
+
+    /// Counts a failure against a worker (and the columns it was on).
+    pub fn blame(&mut self, w: usize, err: TaskError, columns: Option<(u32, u32)>) {
+        let msg = match err {
+            TaskError::Cancelled => return,
+            TaskError::Paused(reason) => {
+                self.workers[w].state = format!("paused ({reason})");
+                return;
+            }
+            TaskError::Refused(msg) => {
+                self.quarantine(w, msg);
+                return;
+            }
+            TaskError::OpticsMissing => "the worker lost the task's optics".to_string(),
+            TaskError::Failed(msg) => msg,
+        };
+        if let Some(e) = &self.opts.events {
+            e.emit(&FarmEvent::TaskFailed { worker: self.workers[w].name.clone(), message: msg.clone() });
+        }
+        self.workers[w].failures += 1;
+        if let Some((first, count)) = columns {
+            for c in first..first + count {
+                let f = self.column_failures.entry(c).or_default();
+                f.insert(w, msg.clone());
+                if f.len() >= self.opts.max_column_failures && self.fatal.is_none() {
+                    let report = f.iter().map(|(&i, m)| format!("  {}: {m}\n", self.workers[i].name)).collect::<String>();
+                    self.fatal = Some(FarmError::ColumnFailed { column: c, workers: f.len(), report });
+                }
+            }
+        }
+        if self.workers[w].failures >= self.opts.max_worker_failures {
+            let n = self.workers[w].failures;
+            self.quarantine(w, format!("{n} failures; the last: {msg}"));
+        }
+    }
+
+    /// The figures so far.
+    pub fn snapshot(&self) -> Stats {
+        let mut s = self.stats.clone();
+        s.columns_total = self.width;
+        s.workers = self
+            .workers
+            .iter()
+            .map(|w| WorkerStats {
+                name: w.name.clone(),
+                address: w.address.clone(),
+                state: if w.state == "rendering" && w.preparing.load(Ordering::Relaxed) { "preparing job".into() } else { w.state.clone() },
+                tasks_done: w.tasks_done,
+                columns_done: w.columns_done,
+                columns_per_s: w.speed.unwrap_or(0.0),
+                failures: w.failures,
+                quarantined: w.quarantined.clone(),
+                connects: w.traffic.connects.load(Ordering::Relaxed),
+                hellos: w.traffic.hellos.load(Ordering::Relaxed),
+                requests: w.traffic.requests.load(Ordering::Relaxed),
+                request_bytes: w.traffic.request_bytes.load(Ordering::Relaxed),
+                optics_sent: w.traffic.optics_sent.load(Ordering::Relaxed),
+                optics_bytes: w.traffic.optics_bytes.load(Ordering::Relaxed),
+            })
+            .collect();
+        s
+    }
+
+    /// Pixels finished: those of accepted columns and of running tasks.
+    pub fn pixels_done(&self) -> u64 {
+        let done = self.columns.iter().filter(|c| c.is_some()).count() as u64 * self.height as u64;
+        let running: u64 =
+            self.tasks.values().filter(|t| t.kind == Kind::Render).map(|t| t.runners.iter().map(|r| self.workers[r.worker].inflight_pixels.load(Ordering::Relaxed)).max().unwrap_or(0)).sum();
+        done + running
+    }
+
+    /// Columns accepted so far, resumed ones included.
+    pub fn columns_done(&self) -> u32 {
+        self.stats.columns_resumed + self.stats.columns_rendered
+    }
+
+    /// The columns of a complete render, each top to bottom.
+    pub fn take_columns(&mut self) -> Option<Vec<Vec<PixelResult>>> {
+        if !self.complete() {
+            return None;
+        }
+        Some(std::mem::take(&mut self.columns).into_iter().map(|c| c.expect("complete")).collect())
+    }
+}
+
+fn bitwise_equal(a: &[PixelResult], b: &[PixelResult]) -> bool {
+    let bits = |p: &PixelResult| -> Vec<u64> {
+        p.xyz.iter().chain(&p.xyz_direct).chain(&p.xyz_stderr).chain(&p.spectral).chain(&p.spectral_stderr).map(|v| v.to_bits()).chain(std::iter::once(p.samples as u64)).collect()
+    };
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
+}
+
+#[cfg(test)]
+mod tests;
