@@ -133,7 +133,7 @@ struct RawSky {
 /// rounding error (about 1 %).
 pub fn default_sampling(q: Quality) -> Sampling {
     match q {
-        Quality::Draft => Sampling { band_nm: 20.0, spp: 8, max_rel_error: None },
+        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None },
         Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01) },
     }
 }

@@ -338,7 +338,30 @@ fn column_altitudes(m: &Medium) -> Vec<f64> {
     z
 }
 
+/// Bumped whenever [`ColumnTable::new`] computes differently, so that no
+/// cached table of an older build is read.
+const COLUMN_ALGORITHM: &str = "sky-columns-1";
+
 impl ColumnTable {
+    /// [`ColumnTable::new`], kept in `dir` (the Mie cache's folder) by a
+    /// hash of the medium: the table depends only on the geometry and the
+    /// density rasters, and computing it is most of what preparing an
+    /// atmosphere's optics costs. A file that does not decode is computed
+    /// again; a cache that cannot be written is not an error.
+    pub fn cached(m: &Medium, dir: Option<&std::path::Path>) -> ColumnTable {
+        let Some(dir) = dir else { return ColumnTable::new(m) };
+        let mut h = blake3::Hasher::new();
+        h.update(COLUMN_ALGORITHM.as_bytes());
+        h.update(&postcard::to_allocvec(m).expect("a medium always encodes"));
+        let path = dir.join("columns").join(format!("{}.postcard", h.finalize().to_hex()));
+        if let Some(t) = std::fs::read(&path).ok().and_then(|b| postcard::from_bytes::<ColumnTable>(&b).ok()) {
+            return t;
+        }
+        let t = ColumnTable::new(m);
+        let _ = crate::mie::cache::write_atomic(&path, &postcard::to_allocvec(&t).expect("a table always encodes"));
+        t
+    }
+
     pub fn new(m: &Medium) -> ColumnTable {
         use rayon::prelude::*;
         let top = m.top_km;
@@ -556,4 +579,25 @@ fn column_along(m: &Medium, z0: f64, mu: f64, k: usize) -> Vec<f64> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cached_column_tables_are_the_computed_ones() {
+        let atm = crate::atmosphere::Atmosphere::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh.toml")).unwrap();
+        let m = Medium::new(&atm);
+        let dir = tempfile::tempdir().unwrap();
+        let fresh = postcard::to_allocvec(&ColumnTable::new(&m)).unwrap();
+        let first = postcard::to_allocvec(&ColumnTable::cached(&m, Some(dir.path()))).unwrap();
+        assert_eq!(std::fs::read_dir(dir.path().join("columns")).unwrap().count(), 1);
+        let second = postcard::to_allocvec(&ColumnTable::cached(&m, Some(dir.path()))).unwrap();
+        assert!(fresh == first && first == second);
+        // A damaged file is computed again, not trusted.
+        let f = std::fs::read_dir(dir.path().join("columns")).unwrap().next().unwrap().unwrap().path();
+        std::fs::write(&f, b"broken").unwrap();
+        assert!(postcard::to_allocvec(&ColumnTable::cached(&m, Some(dir.path()))).unwrap() == fresh);
+    }
 }

@@ -169,7 +169,8 @@ impl Scene {
     /// called after each wavelength, for progress.
     pub fn new(atm: &Atmosphere, s: &SpectralSettings, cache: &MieCache, on_step: &(dyn Fn() + Sync)) -> Scene {
         let medium = Medium::new(atm);
-        let columns = ColumnTable::new(&medium);
+        // Beside the Mie tables: `SKY_CACHE_DIR/columns`.
+        let columns = ColumnTable::cached(&medium, cache.dir().and_then(std::path::Path::parent));
         let bands = Bands::new(atm, s.band_nm, s.wavelength_sampling);
         let band_optics = if s.xyz {
             (0..bands.len())
