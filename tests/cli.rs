@@ -31,12 +31,10 @@ fn help_lists_every_command() {
 fn unbuilt_commands_say_so_and_exit_2() {
     let c = tempfile::tempdir().unwrap();
     let out_file = c.path().join("sky.exr");
-    for cmd in ["preview"] {
-        let o = sky(&[cmd, "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
-        assert_eq!(o.status.code(), Some(2), "{cmd}");
-        assert!(text(&o).1.contains("not implemented yet"), "{cmd}: {}", text(&o).1);
-        assert!(!out_file.exists());
-    }
+    let o = sky(&["preview", "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(text(&o).1.contains("not implemented yet"), "{}", text(&o).1);
+    assert!(!out_file.exists());
 }
 
 #[test]
