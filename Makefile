@@ -33,8 +33,8 @@ demo: build
 	$(SKY) atmosphere inspect atmospheres/hazed.toml --wavelengths 550 --plot $(OUT)/hazed
 	$(SKY) mie --m 1.33-1e-7i --lognormal 4.0,0.55 --wavelength-nm 550
 	$(SKY) render atmospheres/clear.toml --camera fisheye --size 128x128 --sun-zenith-deg 80 --spp 256 --max-rel-error 0.05 --denoise --out $(OUT)/clear_fisheye.exr --png $(OUT)/clear_fisheye.png
-	$(SKY) bake-luts bakes/basis-skies.toml --out $(OUT)/luts --quality draft
-	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/basis-skies.toml --directions 200 --spp 64 --plot $(OUT)/luts/verify
+	$(SKY) bake-luts bakes/demo.toml --out $(OUT)/luts --quality draft
+	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --directions 200 --spp 64 --plot $(OUT)/luts/verify
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --camera fisheye --size 256x256 --out $(OUT)/decoded.exr --png $(OUT)/decoded.png
 	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png;"
 	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 arrays), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png"
