@@ -288,7 +288,7 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
             }
             Assign::Task(t) => {
                 let beat = || shared.sched.lock().unwrap().heard(w, t.id, shared.now());
-                let result = backend.run(&t, &job, (&inflight, &preparing), &traffic, &beat, &shared.cancel).await;
+                let result = backend.run(&t, &job, (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel).await;
                 preparing.store(false, Ordering::Relaxed);
                 {
                     let mut s = shared.sched.lock().unwrap();

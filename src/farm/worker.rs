@@ -245,7 +245,7 @@ impl Worker for Service {
 
     async fn render(&self, request: Request<proto::RenderTask>) -> Result<Response<EventStream>, Status> {
         let peer = request.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
-        let task = request.into_inner();
+        let mut task = request.into_inner();
         let s = self.shared.clone();
         check_task(&task, s.protocol_version())?;
         if let Some(reason) = s.paused_reason() {
@@ -270,9 +270,13 @@ impl Worker for Service {
             (s.config.log)(&WorkerEvent::Fault { what: "killing itself mid-task".into() });
             s.config.faults.maybe_kill_during(_started);
         }
+        let optics = match prepared {
+            Some(p) => Ok(p),
+            None => Err(unpack(&s, task.optics.take().expect("checked above"), task.optics_hash.clone())),
+        };
         let (tx, rx) = mpsc::channel::<Result<proto::RenderEvent, Status>>(8);
         tokio::spawn(async move {
-            let result = run_task(&s, task, view, prepared, &tx).await;
+            let result = run_task(&s, task, view, optics, &tx).await;
             match result {
                 Ok(t) => {
                     let _ = tx.send(Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) })).await;
@@ -327,8 +331,33 @@ pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, us
     Ok((first, count))
 }
 
+/// Optics a task brought, being unpacked (or prepared) into the cache.
+type Unpacking = tokio::task::JoinHandle<Result<Arc<Scene>, Status>>;
+
+/// Unpacks optics a task carries into the cache, on a blocking thread that
+/// runs to the end whatever becomes of the task: once a coordinator has
+/// sent them, the worker holds them (it counts them as sent).
+fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String) -> Unpacking {
+    let shared = s.clone();
+    tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
+        if let Some(p) = shared.optics.get(&hash) {
+            return Ok(p);
+        }
+        let (atm, spectral, scene) = open_optics(&o, &hash)?;
+        let (scene, bytes) = match scene {
+            Some(s) => (s, o.scene.len() as u64),
+            None => {
+                let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
+                let bytes = s.encoded_bytes();
+                (s, bytes)
+            }
+        };
+        Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
+    })
+}
+
 /// Runs one task to its tile, heartbeating through `tx`.
-async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared: Option<Arc<Scene>>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
+async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, optics: Result<Arc<Scene>, Unpacking>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
     let mut paused = s.paused_tx.subscribe();
     let cancel = Arc::new(AtomicBool::new(false));
     let pixels = Arc::new(AtomicU64::new(0));
@@ -351,32 +380,13 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared
         }
     }
     let _not_busy = NotBusy(s);
-    // Unpack (or prepare) the optics if the worker lacks them; optics
-    // another task brought meanwhile are taken as they are.
-    let scene = match prepared.or_else(|| s.optics.get(&task.optics_hash)) {
-        Some(p) => p,
-        None => {
-            let (o, hash) = (task.optics.clone().expect("checked by the caller"), task.optics_hash.clone());
-            let shared = s.clone();
-            // Kept even if the task is cancelled meanwhile: the coordinator
-            // counts them as sent.
-            let work = tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
-                let (atm, spectral, scene) = open_optics(&o, &hash)?;
-                let (scene, bytes) = match scene {
-                    Some(s) => (s, o.scene.len() as u64),
-                    None => {
-                        let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
-                        let bytes = s.encoded_bytes();
-                        (s, bytes)
-                    }
-                };
-                Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
-            });
-            match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
-                Ok(r) => r?,
-                Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
-            }
-        }
+    // The optics: held, or being unpacked since the task arrived.
+    let scene = match optics {
+        Ok(p) => p,
+        Err(work) => match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
+            Ok(r) => r?,
+            Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
+        },
     };
     let (first, count) = task_columns(&task, view.width)?;
     let lines = scene.spectral.spectral_nm.len();
