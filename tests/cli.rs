@@ -334,3 +334,21 @@ fn closed_stdout_exits_quietly() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
 }
+
+/// The hidden `--fault-*` flags exist only in builds with the test-only
+/// `fault-injection` feature: a user's build refuses them as unknown.
+#[test]
+fn fault_flags_exist_only_with_the_test_feature() {
+    let c = tempfile::tempdir().unwrap();
+    let with = cfg!(feature = "fault-injection");
+    for args in [&["worker", "--fault-corrupt", "--help"][..], &["worker", "--fault-sigkill-on-task", "0", "--help"][..], &["render", "--fault-kill-after-columns", "3", "--help"][..]] {
+        let o = sky(args, c.path());
+        let err = text(&o).1;
+        if with {
+            assert_eq!(o.status.code(), Some(0), "{args:?}: {err}");
+        } else {
+            assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+            assert!(err.contains("unexpected argument"), "{args:?}: {err}");
+        }
+    }
+}

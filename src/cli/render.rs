@@ -142,6 +142,7 @@ pub struct RenderArgs {
     #[arg(long, help_heading = "Farm")]
     json_progress: bool,
     /// Fault injection for the farm's tests: SIGKILL this coordinator once N columns are journaled
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_kill_after_columns: Option<u32>,
 }
@@ -285,7 +286,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     let style = super::progress::Style::choose(a.json_progress);
     let view = super::progress::View::new(style);
     opts.events = Some(view.sink.clone());
-    opts.fault_kill_after_columns = a.fault_kill_after_columns;
+    #[cfg(feature = "fault-injection")]
+    {
+        opts.faults.kill_after_columns = a.fault_kill_after_columns;
+    }
     // The optics are prepared once, in the session; a farm job carries
     // them, so every worker renders with the same numbers whatever its
     // maths library.

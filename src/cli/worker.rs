@@ -3,7 +3,7 @@
 use super::{usage, EXIT_INVALID};
 use anyhow::{Context, Result};
 use sky::farm::config::read_token;
-use sky::farm::worker::{self, Config, Faults, Shared};
+use sky::farm::worker::{self, Config, Shared};
 use sky::mie::MieCache;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -51,18 +51,23 @@ pub struct WorkerArgs {
     #[arg(long, default_value_t = sky::lru::DEFAULT_BUDGET_BYTES >> 20, value_parser = clap::value_parser!(u64).range(1..))]
     optics_cache_mib: u64,
     /// Fault injection for the farm's tests: stall forever after N tasks
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_stall_after: Option<u64>,
     /// Fault injection: send tiles containing NaN
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_corrupt: bool,
     /// Fault injection: send tiles off by one ulp
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_perturb: bool,
     /// Fault injection: claim another protocol version
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_protocol: Option<u32>,
     /// Fault injection: SIGKILL itself during task N (from 0)
+    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_sigkill_on_task: Option<u64>,
 }
@@ -174,9 +179,26 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
         Some(d) => MieCache::new(Some(d.clone())),
         None => MieCache::from_env(),
     };
-    let faults =
-        Faults { stall_after_tasks: a.fault_stall_after, corrupt_tiles: a.fault_corrupt, perturb_tiles: a.fault_perturb, protocol_version: a.fault_protocol, sigkill_on_task: a.fault_sigkill_on_task };
-    let shared = Shared::new(Config { name: name.clone(), threads, token, faults, cache, optics_budget: a.optics_cache_mib << 20 })?;
+    let log: worker::Log = {
+        let name = name.clone();
+        std::sync::Arc::new(move |e: &worker::WorkerEvent| eprintln!("sky worker {name}: {e}"))
+    };
+    let shared = Shared::new(Config {
+        name: name.clone(),
+        threads,
+        token,
+        cache,
+        optics_budget: a.optics_cache_mib << 20,
+        log,
+        #[cfg(feature = "fault-injection")]
+        faults: sky::farm::faults::WorkerFaults {
+            stall_after_tasks: a.fault_stall_after,
+            corrupt_tiles: a.fault_corrupt,
+            perturb_tiles: a.fault_perturb,
+            protocol_version: a.fault_protocol,
+            sigkill_on_task: a.fault_sigkill_on_task,
+        },
+    })?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     rt.block_on(serve(shared, addr, tls, a.schedule.clone(), a.owner_load_limit))
 }

@@ -85,9 +85,9 @@ pub struct Options {
     pub events: Option<EventSink>,
     /// How often progress is reported.
     pub progress_period: Duration,
-    /// Fault injection for tests: SIGKILL this process once the journal
-    /// holds at least this many columns.
-    pub fault_kill_after_columns: Option<u32>,
+    /// Faults to commit, for the farm's tests.
+    #[cfg(feature = "fault-injection")]
+    pub faults: super::faults::CoordinatorFaults,
 }
 
 impl Default for Options {
@@ -103,7 +103,8 @@ impl Default for Options {
             tls: None,
             events: None,
             progress_period: Duration::from_secs(1),
-            fault_kill_after_columns: None,
+            #[cfg(feature = "fault-injection")]
+            faults: Default::default(),
         }
     }
 }
@@ -287,21 +288,15 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
             }
             Assign::Task(t) => {
                 let beat = || shared.sched.lock().unwrap().heard(w, t.id, shared.now());
-                let result = backend.run(&t, &job, (&inflight, &preparing), &traffic, &beat, &shared.cancel).await;
+                let result = backend.run(&t, &job, (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel).await;
                 preparing.store(false, Ordering::Relaxed);
                 {
                     let mut s = shared.sched.lock().unwrap();
                     match result {
                         Ok(cols) => {
                             s.finish(w, t.id, cols, shared.now());
-                            if opts.fault_kill_after_columns.is_some_and(|n| s.columns_done() >= n) {
-                                eprintln!("sky render: killing itself after {} columns (fault injection)", s.columns_done());
-                                // SAFETY: sending a signal to our own process.
-                                #[cfg(unix)]
-                                unsafe {
-                                    libc::kill(libc::getpid(), libc::SIGKILL);
-                                }
-                            }
+                            #[cfg(feature = "fault-injection")]
+                            opts.faults.accepted(s.columns_done());
                         }
                         Err(e) => {
                             let render = s.is_render(t.id);

@@ -167,13 +167,15 @@ impl Backend {
 
     /// Runs task `t` to its checked columns: `beat` is called for every
     /// sign of life (the embedded worker's ticks, a remote's heartbeats);
-    /// the task ends Cancelled when its stop signal or `stop_all` says so.
+    /// the task ends Cancelled when its stop signal or `stop_all` says so
+    /// (a task carrying optics only once they are uploaded, within `lease`).
     pub async fn run(
         &mut self,
         t: &Assignment,
         job: &FarmJob,
         (inflight, preparing): (&Arc<AtomicU64>, &AtomicBool),
         traffic: &Traffic,
+        lease: Duration,
         beat: &(dyn Fn() + Send + Sync),
         stop_all: &AtomicBool,
     ) -> Result<Vec<Vec<PixelResult>>, TaskError> {
@@ -239,9 +241,19 @@ impl Backend {
                         Traffic::add(&traffic.optics_bytes, o.encoded_len() as u64);
                     }
                     let mut rx = t.stop.clone();
-                    let call = tokio::select! {
-                        r = c.render(task) => r,
-                        _ = rx.changed() => return Err(TaskError::Cancelled),
+                    let call = if send_optics {
+                        // Optics are not abandoned halfway (the worker keeps
+                        // what arrives whole, and counts as holding it),
+                        // however long the upload: no more than a lease.
+                        match tokio::time::timeout(lease, c.render(task)).await {
+                            Err(_) => return Err(TaskError::Failed(format!("{uri}: the task with its optics took longer than the lease of {lease:?}"))),
+                            Ok(r) => r,
+                        }
+                    } else {
+                        tokio::select! {
+                            r = c.render(task) => r,
+                            _ = rx.changed() => return Err(TaskError::Cancelled),
+                        }
                     };
                     match call {
                         Err(status) => match classify(&status) {

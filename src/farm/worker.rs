@@ -19,23 +19,50 @@ use tokio::sync::{mpsc, watch};
 use tokio_stream::Stream;
 use tonic::{Request, Response, Status};
 
-/// Faults a worker can be told to commit, for the farm's own tests (hidden
-/// flags of `sky worker`).
-#[derive(Debug, Clone, Default)]
-pub struct Faults {
-    /// After this many tasks, accept tasks and never answer again.
-    pub stall_after_tasks: Option<u64>,
-    /// Send tiles with a NaN in them.
-    pub corrupt_tiles: bool,
-    /// Send tiles whose values are off by one ulp (a wrong but plausible
-    /// result, which only verification catches).
-    pub perturb_tiles: bool,
-    /// Claim this protocol version instead of the real one.
-    pub protocol_version: Option<u32>,
-    /// On this task (counting from 0), SIGKILL the worker's own process a
-    /// moment after the render starts.
-    pub sigkill_on_task: Option<u64>,
+/// What a worker has to say to its owner: the library prints nothing, the
+/// CLI (`sky worker`) prints these as log lines.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WorkerEvent {
+    Paused {
+        reason: String,
+    },
+    Resumed,
+    /// A coordinator of another protocol said Hello.
+    RefusedCoordinator {
+        coordinator: String,
+        theirs: u32,
+        ours: u32,
+    },
+    /// A call with the wrong token.
+    WrongToken {
+        peer: String,
+    },
+    /// A task failed (not cancelled) on this worker.
+    TaskFailed {
+        peer: String,
+        message: String,
+    },
+    /// A test fault was committed (only with the `fault-injection` feature).
+    Fault {
+        what: String,
+    },
 }
+
+impl std::fmt::Display for WorkerEvent {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            WorkerEvent::Paused { reason } => write!(f, "paused ({reason})"),
+            WorkerEvent::Resumed => write!(f, "resumed"),
+            WorkerEvent::RefusedCoordinator { coordinator, theirs, ours } => write!(f, "refused coordinator {coordinator:?}: it speaks farm protocol {theirs}, this worker {ours}"),
+            WorkerEvent::WrongToken { peer } => write!(f, "refused {peer}: wrong token"),
+            WorkerEvent::TaskFailed { peer, message } => write!(f, "task from {peer}: {message}"),
+            WorkerEvent::Fault { what } => write!(f, "{what} (fault injection)"),
+        }
+    }
+}
+
+/// Where a worker's events go.
+pub type Log = Arc<dyn Fn(&WorkerEvent) + Send + Sync>;
 
 /// Why a worker is paused (any of them pauses it).
 #[derive(Debug, Clone, Default)]
@@ -69,11 +96,15 @@ pub struct Config {
     pub threads: usize,
     /// The shared token every call must carry.
     pub token: String,
-    pub faults: Faults,
     pub cache: MieCache,
     /// The most bytes of prepared optics kept (least recently used evicted
     /// first; optics a running task uses never).
     pub optics_budget: u64,
+    /// Where the worker's events go (the CLI prints them).
+    pub log: Log,
+    /// Faults to commit, for the farm's tests.
+    #[cfg(feature = "fault-injection")]
+    pub faults: super::faults::WorkerFaults,
 }
 
 /// The worker's shared state.
@@ -119,8 +150,8 @@ impl Shared {
         let after = p.reason();
         if before != after {
             match &after {
-                Some(r) => eprintln!("sky worker {}: paused ({r})", self.config.name),
-                None => eprintln!("sky worker {}: resumed", self.config.name),
+                Some(r) => (self.config.log)(&WorkerEvent::Paused { reason: r.clone() }),
+                None => (self.config.log)(&WorkerEvent::Resumed),
             }
         }
         self.paused_tx.send_replace(after.is_some());
@@ -142,7 +173,11 @@ impl Shared {
     }
 
     fn protocol_version(&self) -> u32 {
-        self.config.faults.protocol_version.unwrap_or(PROTOCOL_VERSION)
+        #[cfg(feature = "fault-injection")]
+        if let Some(v) = self.config.faults.protocol_version {
+            return v;
+        }
+        PROTOCOL_VERSION
     }
 
     /// The optics hashes held now, most recently used first.
@@ -174,7 +209,7 @@ impl Worker for Service {
         let r = request.into_inner();
         let s = &self.shared;
         if r.protocol_version != s.protocol_version() {
-            eprintln!("sky worker {}: refused coordinator {:?}: it speaks farm protocol {}, this worker {}", s.config.name, r.coordinator, r.protocol_version, s.protocol_version());
+            (s.config.log)(&WorkerEvent::RefusedCoordinator { coordinator: r.coordinator.clone(), theirs: r.protocol_version, ours: s.protocol_version() });
         }
         Ok(Response::new(proto::HelloReply {
             protocol_version: s.protocol_version(),
@@ -210,15 +245,16 @@ impl Worker for Service {
 
     async fn render(&self, request: Request<proto::RenderTask>) -> Result<Response<EventStream>, Status> {
         let peer = request.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
-        let task = request.into_inner();
+        let mut task = request.into_inner();
         let s = self.shared.clone();
         check_task(&task, s.protocol_version())?;
         if let Some(reason) = s.paused_reason() {
             return Err(super::protocol::paused_status(&reason));
         }
-        let started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
-        if s.config.faults.stall_after_tasks.is_some_and(|n| started >= n) {
-            eprintln!("sky worker {}: stalling on task {} (fault injection)", s.config.name, task.task_id);
+        let _started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
+        #[cfg(feature = "fault-injection")]
+        if s.config.faults.stalls(_started) {
+            (s.config.log)(&WorkerEvent::Fault { what: format!("stalling on task {}", task.task_id) });
             return Ok(Response::new(Box::pin(tokio_stream::pending())));
         }
         // The view travels with every task; the optics are held already or
@@ -229,27 +265,25 @@ impl Worker for Service {
         if prepared.is_none() && task.optics.is_none() {
             return Err(super::protocol::optics_missing_status(&task.optics_hash));
         }
-        if s.config.faults.sigkill_on_task == Some(started) {
-            eprintln!("sky worker {}: killing itself mid-task (fault injection)", s.config.name);
-            tokio::spawn(async {
-                tokio::time::sleep(Duration::from_millis(150)).await;
-                // SAFETY: sending a signal to our own process.
-                #[cfg(unix)]
-                unsafe {
-                    libc::kill(libc::getpid(), libc::SIGKILL);
-                }
-            });
+        #[cfg(feature = "fault-injection")]
+        if s.config.faults.sigkill_on_task == Some(_started) {
+            (s.config.log)(&WorkerEvent::Fault { what: "killing itself mid-task".into() });
+            s.config.faults.maybe_kill_during(_started);
         }
+        let optics = match prepared {
+            Some(p) => Ok(p),
+            None => Err(unpack(&s, task.optics.take().expect("checked above"), task.optics_hash.clone())),
+        };
         let (tx, rx) = mpsc::channel::<Result<proto::RenderEvent, Status>>(8);
         tokio::spawn(async move {
-            let result = run_task(&s, task, view, prepared, &tx).await;
+            let result = run_task(&s, task, view, optics, &tx).await;
             match result {
                 Ok(t) => {
                     let _ = tx.send(Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) })).await;
                 }
                 Err(status) => {
                     if status.code() != tonic::Code::Cancelled {
-                        eprintln!("sky worker {}: task from {peer}: {}", s.config.name, status.message());
+                        (s.config.log)(&WorkerEvent::TaskFailed { peer, message: status.message().to_string() });
                     }
                     let _ = tx.send(Err(status)).await;
                 }
@@ -297,8 +331,33 @@ pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, us
     Ok((first, count))
 }
 
+/// Optics a task brought, being unpacked (or prepared) into the cache.
+type Unpacking = tokio::task::JoinHandle<Result<Arc<Scene>, Status>>;
+
+/// Unpacks optics a task carries into the cache, on a blocking thread that
+/// runs to the end whatever becomes of the task: once a coordinator has
+/// sent them, the worker holds them (it counts them as sent).
+fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String) -> Unpacking {
+    let shared = s.clone();
+    tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
+        if let Some(p) = shared.optics.get(&hash) {
+            return Ok(p);
+        }
+        let (atm, spectral, scene) = open_optics(&o, &hash)?;
+        let (scene, bytes) = match scene {
+            Some(s) => (s, o.scene.len() as u64),
+            None => {
+                let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
+                let bytes = s.encoded_bytes();
+                (s, bytes)
+            }
+        };
+        Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
+    })
+}
+
 /// Runs one task to its tile, heartbeating through `tx`.
-async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared: Option<Arc<Scene>>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
+async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, optics: Result<Arc<Scene>, Unpacking>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
     let mut paused = s.paused_tx.subscribe();
     let cancel = Arc::new(AtomicBool::new(false));
     let pixels = Arc::new(AtomicU64::new(0));
@@ -321,32 +380,13 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared
         }
     }
     let _not_busy = NotBusy(s);
-    // Unpack (or prepare) the optics if the worker lacks them; optics
-    // another task brought meanwhile are taken as they are.
-    let scene = match prepared.or_else(|| s.optics.get(&task.optics_hash)) {
-        Some(p) => p,
-        None => {
-            let (o, hash) = (task.optics.clone().expect("checked by the caller"), task.optics_hash.clone());
-            let shared = s.clone();
-            // Kept even if the task is cancelled meanwhile: the coordinator
-            // counts them as sent.
-            let work = tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
-                let (atm, spectral, scene) = open_optics(&o, &hash)?;
-                let (scene, bytes) = match scene {
-                    Some(s) => (s, o.scene.len() as u64),
-                    None => {
-                        let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
-                        let bytes = s.encoded_bytes();
-                        (s, bytes)
-                    }
-                };
-                Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
-            });
-            match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
-                Ok(r) => r?,
-                Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
-            }
-        }
+    // The optics: held, or being unpacked since the task arrived.
+    let scene = match optics {
+        Ok(p) => p,
+        Err(work) => match watch_blocking(work, tx, &mut paused, &cancel, || heartbeat(0, true), s).await? {
+            Ok(r) => r?,
+            Err(e) => return Err(Status::internal(format!("preparing the optics panicked: {e}"))),
+        },
     };
     let (first, count) = task_columns(&task, view.width)?;
     let lines = scene.spectral.spectral_nm.len();
@@ -367,13 +407,10 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, prepared
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };
+    #[allow(unused_mut)]
     let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, height, lines, &columns);
-    if s.config.faults.corrupt_tiles {
-        t.values[0] = f64::NAN;
-    }
-    if s.config.faults.perturb_tiles {
-        t.values[1] = f64::from_bits(t.values[1].to_bits() + 1);
-    }
+    #[cfg(feature = "fault-injection")]
+    s.config.faults.spoil(&mut t);
     s.tasks_done.fetch_add(1, Ordering::Relaxed);
     s.columns_done.fetch_add(count as u64, Ordering::Relaxed);
     Ok(t)
@@ -423,14 +460,14 @@ fn same_token(a: &[u8], b: &[u8]) -> bool {
 /// The service with its token check and message limits.
 pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedService<WorkerServer<Service>, impl tonic::service::Interceptor + Clone> {
     let token = shared.config.token.clone();
-    let name = shared.config.name.clone();
+    let log = shared.config.log.clone();
     let check = move |req: Request<()>| -> Result<Request<()>, Status> {
         let got = req.metadata().get("authorization").and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer "));
         match got {
             Some(t) if same_token(t.as_bytes(), token.as_bytes()) => Ok(req),
             Some(_) => {
                 let peer = req.remote_addr().map(|a| a.to_string()).unwrap_or_else(|| "?".into());
-                eprintln!("sky worker {name}: refused {peer}: wrong token");
+                log(&WorkerEvent::WrongToken { peer });
                 Err(Status::unauthenticated("wrong farm token"))
             }
             None => Err(Status::unauthenticated("missing farm token (authorization: Bearer ...)")),
