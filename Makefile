@@ -26,7 +26,10 @@ test: build ktx-parse
 	$(CARGO) test --release --locked --features fault-injection
 	$(CARGO) build --release --locked
 
+# Node.js and npm from Debian when the machine lacks them (CI runs as root
+# on a fresh machine); otherwise say what is missing.
 ktx-parse:
+	@command -v npm >/dev/null 2>&1 || { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then apt-get update -qq && apt-get install -y -qq nodejs npm; else echo "make test needs Node.js and npm (e.g. apt-get install nodejs npm)" >&2; exit 1; fi; }
 	npm ci --prefix tests/ktx_parse --no-audit --no-fund
 
 # The main job on the embedded default: optical properties and plots of the
