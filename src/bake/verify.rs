@@ -117,7 +117,10 @@ pub fn sky_lattice(n: usize) -> Vec<(f64, f64)> {
 }
 
 /// Verifies every basis sky of `luts` that `bake` names (the bake file
-/// gives the atmospheres and the quality's spectral settings).
+/// gives the atmospheres and the quality's spectral settings);
+/// `on_reference(sky, sun elevation)` is called before each reference
+/// render, for progress.
+#[allow(clippy::too_many_arguments)]
 pub fn verify(
     luts: &Luts,
     bake: &BakeFile,
@@ -125,6 +128,7 @@ pub fn verify(
     opts: &VerifyOptions,
     optics: &OpticsCache,
     mie: &MieCache,
+    on_reference: &dyn Fn(&str, f64),
     cancel: Arc<AtomicBool>,
 ) -> Result<Vec<SkyVerification>, BakeError> {
     let quality = if luts.manifest.quality == "final" { super::Quality::Final } else { super::Quality::Draft };
@@ -142,6 +146,7 @@ pub fn verify(
         }
         let mut errors = Vec::new();
         for (elev, centre) in elevations {
+            on_reference(&sky.name, elev);
             let view = View {
                 camera: Camera::Directions(dirs.clone()),
                 width: dirs.len(),

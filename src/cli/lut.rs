@@ -242,7 +242,9 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
     let opts = VerifyOptions { directions: a.directions, spp: a.spp, ..VerifyOptions::default() };
     eprintln!("sky lut verify: rendering references ({} directions, {} spp) at 13 sun elevations per basis sky", a.directions, a.spp);
     let optics = sky::session::OpticsCache::default();
-    let report = match verify(&luts, &bake, cache.as_ref(), &opts, &optics, &mie, cancel.clone()) {
+    let started = std::time::Instant::now();
+    let on_reference = |sky: &str, elev: f64| eprintln!("sky lut verify: {sky}: reference at sun elevation {elev:.2} deg (elapsed {:.0} s)", started.elapsed().as_secs_f64());
+    let report = match verify(&luts, &bake, cache.as_ref(), &opts, &optics, &mie, &on_reference, cancel.clone()) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("sky lut verify: {e}");
