@@ -96,7 +96,7 @@ pub struct DecodeArgs {
     #[arg(long, value_enum, default_value = "fisheye")]
     camera: CameraKind,
     /// Image size WIDTHxHEIGHT
-    #[arg(long, value_parser = parse_size, default_value = "256x256")]
+    #[arg(long, value_parser = super::render::parse_size, default_value = "256x256")]
     size: (usize, usize),
     /// Pinhole: view azimuth, degrees
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
@@ -126,16 +126,6 @@ fn parse_pair(s: &str) -> Result<(f64, f64), String> {
         return Err(format!("`{s}`: the zenith angle must be from 0 to 180 degrees"));
     }
     Ok((a, b))
-}
-
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
-    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 256x256"))?;
-    let w: usize = w.trim().parse().map_err(|_| format!("`{s}`: bad width"))?;
-    let h: usize = h.trim().parse().map_err(|_| format!("`{s}`: bad height"))?;
-    if w == 0 || h == 0 || w > 16384 || h > 16384 {
-        return Err(format!("`{s}`: width and height must be from 1 to 16384"));
-    }
-    Ok((w, h))
 }
 
 fn check(c: &Conditions) -> Result<()> {

@@ -147,7 +147,7 @@ pub struct RenderArgs {
     fault_kill_after_columns: Option<u32>,
 }
 
-fn parse_size(s: &str) -> Result<(usize, usize), String> {
+pub(super) fn parse_size(s: &str) -> Result<(usize, usize), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("`{s}`: expected WIDTHxHEIGHT, e.g. 256x128"))?;
     let w: usize = w.trim().parse().map_err(|_| format!("`{s}`: bad width"))?;
     let h: usize = h.trim().parse().map_err(|_| format!("`{s}`: bad height"))?;
