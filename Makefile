@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
+.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
 
 all: build
 
@@ -15,6 +15,8 @@ build:
 	$(CARGO) build --release --locked
 
 # The whole test suite, in the release profile so dependencies build once.
+# tests/openjd.rs runs Open Job Description's CLI from .venv-openjd (`make
+# openjd`) and fails without it.
 # tests/ktx_readers.rs reads our KTX2 files with npm's ktx-parse (pinned in
 # tests/ktx_parse/package-lock.json; needs node and npm) and fails without it.
 # The farm's tests kill, stall and corrupt workers through hidden flags that
@@ -22,7 +24,7 @@ build:
 # test` runs without it and reports those tests ignored). Only the sky
 # crate is rebuilt with it, and rebuilt without it afterwards, so that
 # target/release/sky is a user's build again.
-test: build ktx-parse
+test: build ktx-parse openjd
 	$(CARGO) test --release --locked --features fault-injection
 	$(CARGO) build --release --locked
 
@@ -31,6 +33,13 @@ test: build ktx-parse
 ktx-parse:
 	@command -v npm >/dev/null 2>&1 || { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then apt-get update -qq && apt-get install -y -qq nodejs npm; else echo "make test needs Node.js and npm (e.g. apt-get install nodejs npm)" >&2; exit 1; fi; }
 	npm ci --prefix tests/ktx_parse --no-audit --no-fund
+
+# Open Job Description's CLI (pinned in scripts/requirements-openjd.txt) for
+# tests/openjd.rs, in .venv-openjd; python3-venv from Debian when a root CI
+# machine lacks it.
+openjd:
+	@[ -x .venv-openjd/bin/openjd ] || python3 -m venv .venv-openjd 2>/dev/null || { rm -rf .venv-openjd; if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then apt-get update -qq && apt-get install -y -qq python3-venv && python3 -m venv .venv-openjd; else echo "make test needs python3 with venv (e.g. apt-get install python3-venv)" >&2; exit 1; fi; }
+	.venv-openjd/bin/pip install -q --disable-pip-version-check -r scripts/requirements-openjd.txt
 
 # The main job on the embedded default: optical properties and plots of the
 # basis atmospheres, a look at Mie theory, a rendered sky, and a draft bake of

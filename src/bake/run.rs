@@ -62,6 +62,10 @@ pub struct BakeOptions {
     pub cores: usize,
     /// Only these slices (none: every slice of every basis sky).
     pub only: Option<Vec<SliceId>>,
+    /// Render nothing: every slice must be in the cache (a farm manager's
+    /// pack step, after its render tasks), or the bake fails naming those
+    /// that are not.
+    pub pack_only: bool,
     pub events: Option<BakeSink>,
 }
 
@@ -194,6 +198,12 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             cached,
         };
         plan.push(Planned { atm, bundle, out, views });
+    }
+    if opts.pack_only {
+        let missing: Vec<String> = plan.iter().flat_map(|p| p.views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(i, _)| format!("{}:{i}", p.out.sky.name))).collect();
+        if !missing.is_empty() {
+            return Err(BakeError::NotInCache { cache: opts.cache.dir().to_path_buf(), missing });
+        }
     }
     let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum();
     let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum();

@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 #[derive(clap::Args, Debug)]
 #[command(
-    after_help = "Examples:\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality draft\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality final --farm farm/farm.toml\n\nA re-run with nothing changed renders nothing: rendered slices are kept in a content-addressed cache (--cache, default OUT/cache), so a bake that was stopped resumes where it stopped."
+    after_help = "Examples:\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality draft\n  sky bake-luts bakes/basis-skies.toml --out luts/ --quality final --farm farm/farm.toml\n  sky bake-luts bakes/basis-skies.toml --out job/ --plan openjd    # a job for AWS Deadline Cloud or `openjd run`\n\nA re-run with nothing changed renders nothing: rendered slices are kept in a content-addressed cache (--cache, default OUT/cache), so a bake that was stopped resumes where it stopped."
 )]
 pub struct BakeArgs {
     /// The bake file: basis skies, atmosphere files, slice sizes, quality presets
@@ -39,6 +39,15 @@ pub struct BakeArgs {
     /// Only these slices, NAME:INDEX (repeatable or comma-separated), into the cache; nothing is packed
     #[arg(long, value_delimiter = ',', value_name = "NAME:INDEX")]
     slice: Vec<SliceId>,
+    /// Pack the cached slices only: render nothing, and fail naming the slices the cache lacks
+    #[arg(long, conflicts_with = "slice")]
+    pack_only: bool,
+    /// Write a job for a farm manager instead of baking: `openjd` writes OUT/bake.openjd.yaml (Open Job Description), a task per slice and a pack step
+    #[arg(long, value_enum, value_name = "FORMAT", conflicts_with_all = ["slice", "pack_only", "json_progress"])]
+    plan: Option<PlanFormat>,
+    /// With --plan: the sky command the farm's hosts run (default: this program's absolute path)
+    #[arg(long, value_name = "COMMAND", requires = "plan")]
+    sky_executable: Option<String>,
     /// Threads of the embedded worker (default: all cores)
     #[arg(long)]
     threads: Option<usize>,
@@ -50,6 +59,12 @@ pub struct BakeArgs {
     json_progress: bool,
     #[command(flatten)]
     farm: FarmArgs,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum PlanFormat {
+    /// An Open Job Description job template (AWS Deadline Cloud; `openjd` runs it locally)
+    Openjd,
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -147,6 +162,9 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         QualityArg::Draft => Quality::Draft,
         QualityArg::Final => Quality::Final,
     };
+    if let Some(PlanFormat::Openjd) = a.plan {
+        return write_openjd_plan(&a, &bake, quality);
+    }
     let threads = a.threads.unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     let (workers, farm) = match farm_plan(&a.farm)? {
         Some(plan) => plan,
@@ -163,7 +181,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     };
     let style = Style::choose(a.json_progress);
     let bar = Arc::new(Mutex::new(None));
-    let opts = BakeOptions { quality, cache, workers, farm, cores, only: (!a.slice.is_empty()).then(|| a.slice.clone()), events: Some(sink(style, bar.clone())) };
+    let opts = BakeOptions { quality, cache, workers, farm, cores, only: (!a.slice.is_empty()).then(|| a.slice.clone()), pack_only: a.pack_only, events: Some(sink(style, bar.clone())) };
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let c = cancel.clone();
@@ -227,6 +245,58 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             "{}",
             serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "errors": [] })
         );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `--plan openjd`: the bake as an Open Job Description job template in
+/// the output folder, its paths relative to it.
+fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<ExitCode> {
+    if a.farm.farm.is_some() || !a.farm.workers.is_empty() {
+        return usage("--plan writes a job for another farm manager: it takes no --farm or --workers");
+    }
+    let fail = |what: String| -> Result<ExitCode> {
+        eprintln!("sky bake-luts: {what}");
+        Ok(ExitCode::from(EXIT_INVALID))
+    };
+    if let Err(e) = std::fs::create_dir_all(&a.out) {
+        return fail(format!("cannot create {}: {e}", a.out.display()));
+    }
+    let canonical = |p: &std::path::Path| std::fs::canonicalize(p).map_err(|e| format!("{}: {e}", p.display()));
+    let cache_dir = a.cache.clone().unwrap_or_else(|| a.out.join("cache"));
+    if let Err(e) = std::fs::create_dir_all(&cache_dir) {
+        return fail(format!("cannot create the cache {}: {e}", cache_dir.display()));
+    }
+    let (out, bake_path, cache) = match (canonical(&a.out), canonical(&a.bake), canonical(&cache_dir)) {
+        (Ok(o), Ok(b), Ok(c)) => (o, b, c),
+        (Err(e), _, _) | (_, Err(e), _) | (_, _, Err(e)) => return fail(e),
+    };
+    let within = |p: &std::path::Path| bake::openjd::default_within(&out, p);
+    let sky_executable = match &a.sky_executable {
+        Some(s) => s.clone(),
+        None => match std::env::current_exe() {
+            Ok(p) => p.to_string_lossy().into_owned(),
+            Err(_) => "sky".to_string(),
+        },
+    };
+    let defaults = bake::openjd::PlanDefaults { sky_executable, bake_file: within(&bake_path), out_dir: ".".into(), cache_dir: within(&cache), quality, colour_space: a.colour_space };
+    let stem = bake_path.file_stem().map_or("bake".into(), |s| s.to_string_lossy().into_owned());
+    let text = bake::openjd::job_template(bake, &format!("sky bake-luts {stem}"), &defaults);
+    let path = out.join(bake::openjd::TEMPLATE_FILE);
+    if let Err(e) = sky::lut::atomic::write_atomically(&path, text.as_bytes()) {
+        return fail(format!("cannot write {}: {e}", path.display()));
+    }
+    // This machine's values of the path parameters, for `openjd run -p file://...`.
+    let params = serde_json::json!({ "BakeFile": bake_path, "OutDir": out, "CacheDir": cache });
+    let params_path = out.join(bake::openjd::PARAMS_FILE);
+    if let Err(e) = sky::lut::atomic::write_atomically(&params_path, format!("{params:#}\n").as_bytes()) {
+        return fail(format!("cannot write {}: {e}", params_path.display()));
+    }
+    let tasks: usize = bake.skies.iter().map(|s| s.slices).sum();
+    eprintln!("sky bake-luts: {} (Open Job Description): {tasks} render tasks, one per slice, then a pack step", path.display());
+    eprintln!("sky bake-luts: check it with `openjd check {}`; run it here with `openjd run {} -p file://{} --step Pack --run-dependencies`", path.display(), path.display(), params_path.display());
+    if a.json {
+        outln!("{}", serde_json::json!({ "plan": "openjd", "template": path, "parameters": params_path, "render_tasks": tasks, "quality": quality.name(), "cache": cache }));
     }
     Ok(ExitCode::SUCCESS)
 }
