@@ -23,6 +23,11 @@ pub enum LutCommand {
         after_help = "Example:\n  sky lut verify luts/manifest.json --bake bakes/basis-skies.toml --plot luts/verify\n\nRenders references at the sun elevations between slices 41.7, 23.3, 8.2, 3.1, 0.4, -2.7, -7.5 degrees and at six slice centres, over a lattice of directions above the horizon."
     )]
     Verify(VerifyArgs),
+    /// What the LUT mappings lose by interpolating, on an atmosphere's noise-free single-scattering sky; the threshold between the two direction mappings, measured
+    #[command(
+        after_help = "Example:\n  sky lut interpolation atmospheres/clear.toml --size 32x128\n\nBakes the single-scattering sky (no noise) in memory through the LUT mappings and decodes it with the reference decoder: direction interpolation at every slice from 60 deg sun zenith to the horizon in both direction mappings, slice interpolation between slices, and the twilight's largest step."
+    )]
+    Interpolation(super::lut_interpolation::InterpolationArgs),
 }
 
 #[derive(Args, Debug)]
@@ -172,6 +177,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         LutCommand::Verify(a) => verify(a),
+        LutCommand::Interpolation(a) => super::lut_interpolation::run(a),
         LutCommand::Decode(a) => {
             check(&a.conditions)?;
             if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {

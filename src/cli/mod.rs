@@ -18,6 +18,7 @@ mod bake;
 mod bench;
 mod farm_args;
 mod lut;
+mod lut_interpolation;
 mod mie;
 mod progress;
 mod render;

@@ -27,6 +27,7 @@ pub mod output;
 pub mod rng;
 pub mod sampling;
 pub mod segments;
+pub mod single;
 pub mod tracer;
 
 use crate::atmosphere::Atmosphere;
