@@ -19,6 +19,9 @@
 //! height = 128               # texels along v (angle from the sun)
 //! slices = 64                # the talk's time mapping: 48 above the horizon, 16 below
 //! altitude_m = 0.0           # the observer
+//! threshold_deg = 87.9       # sun zenith beyond which slices are latitude-longitude
+//!                            # (default: mapping::default_threshold_deg; measure it
+//!                            # with `sky lut interpolation ATMOSPHERE --size WxH`)
 //! ```
 
 use crate::atmosphere::Located;
@@ -69,6 +72,9 @@ pub struct BasisSky {
     pub height: usize,
     pub slices: usize,
     pub altitude_m: f64,
+    /// The sun zenith angle beyond which a slice uses the latitude-longitude
+    /// mapping instead of the sun-centred one, degrees.
+    pub threshold_deg: f64,
     /// The line of its `[[sky]]` table, for messages.
     pub line: usize,
     pub draft: Sampling,
@@ -124,6 +130,7 @@ struct RawSky {
     height: S<i64>,
     slices: Option<S<i64>>,
     altitude_m: Option<S<f64>>,
+    threshold_deg: Option<S<f64>>,
     #[serde(default)]
     quality: BTreeMap<String, S<RawSampling>>,
 }
@@ -273,9 +280,17 @@ impl BakeFile {
                     0.0
                 }
             };
+            let threshold_deg = match &r.threshold_deg {
+                None => mapping::default_threshold_deg(width.max(1), height.max(1)),
+                Some(t) if (0.0..=90.0).contains(t.get_ref()) => *t.get_ref(),
+                Some(t) => {
+                    ctx.err(t, format!("sky {name:?}: threshold_deg must be a sun zenith angle from 0 to 90 degrees, got {}", t.get_ref()));
+                    90.0
+                }
+            };
             let [draft, final_] = ctx.presets([&global[0], &global[1]], &r.quality, &format!("sky {name:?}: "));
             let line = ctx.line(s.span().start);
-            skies.push(BasisSky { name, atmosphere, width, height, slices, altitude_m, line, draft, final_ });
+            skies.push(BasisSky { name, atmosphere, width, height, slices, altitude_m, threshold_deg, line, draft, final_ });
         }
         if ctx.errors.is_empty() {
             Ok(BakeFile { path: path.to_path_buf(), skies })

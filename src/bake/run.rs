@@ -166,7 +166,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let sampling = sky.sampling(opts.quality).clone();
         let spectral = spectral_settings(&sampling);
         let (radius_km, top_km) = (atm.planet.radius_km, atm.planet.top_km);
-        let threshold_deg = mapping::default_threshold_deg(sky.width, sky.height);
+        let threshold_deg = sky.threshold_deg;
         let mut views = Vec::new();
         let mut slices = Vec::new();
         let mut cached = 0;

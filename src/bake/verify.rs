@@ -230,6 +230,7 @@ fn quantisation(
         height: entry.height,
         slices: entry.layers,
         altitude_m: entry.altitude_m,
+        threshold_deg: entry.threshold_sun_zenith_deg,
         line: 0,
         draft: sampling.clone(),
         final_: sampling.clone(),

@@ -4,8 +4,8 @@
 //! (the time mapping's inverse), the direction's (u, v) through the mapping
 //! of the actual sun (each slice read in the region it was rendered in),
 //! bilinear filtering at texel centres with clamp-to-edge (the mirror at
-//! u = 0 and 1), each slice's scale, and linear interpolation between the
-//! two slices; then it blends the basis skies. The GPU preview must match
+//! u = 0 and 1), each slice's scale, and interpolation between the two
+//! slices (geometric where both are positive: [`between_slices`]); then it blends the basis skies. The GPU preview must match
 //! it.
 
 use super::manifest::{Manifest, SkyEntry};
@@ -67,24 +67,48 @@ pub fn sample_sky(entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, sun_
     let s = mapping::slice_coordinate(sun_zenith_deg, entry.planet_radius_km, entry.top_km);
     let last = entry.layers - 1;
     let i0 = (s.floor() as usize).min(last.saturating_sub(1));
-    let f = (s - i0 as f64).clamp(0.0, 1.0);
+    let i1 = (i0 + 1).min(last);
+    // The fraction of the way in sun zenith angle from slice i0 to i1 (not
+    // in the slice coordinate, which is quadratic in the angle below the
+    // horizon): with the geometric blend, a sky that changes exponentially
+    // with the sun's angle decodes exactly.
+    let (z0, z1) = (entry.slices[i0].sun_zenith_deg, entry.slices[i1].sun_zenith_deg);
+    let f = if z1 > z0 { ((sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG) - z0) / (z1 - z0)).clamp(0.0, 1.0) } else { 0.0 };
     let d = rotate_to_sun_frame(dir, sun_azimuth_deg);
     // The mapping of the actual sun; each slice in its own region.
     let m = DirectionMapping::new(sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG), entry.threshold_sun_zenith_deg);
-    let mut out = [0.0; 3];
-    for (layer, weight) in [(i0, 1.0 - f), ((i0 + 1).min(last), f)] {
-        if weight == 0.0 {
-            continue;
-        }
+    let read = |layer: usize| {
         let slice = &entry.slices[layer];
         let (u, v) = m.uv_in_region(d, slice.sun_zenith_deg <= entry.threshold_sun_zenith_deg);
-        let rgb = texture.bilinear(layer, u, v);
         let scale = (-slice.scale_log2 as f64).exp2();
-        for c in 0..3 {
-            out[c] += weight * scale * rgb[c];
-        }
+        texture.bilinear(layer, u, v).map(|x| x * scale)
+    };
+    if f == 0.0 {
+        return read(i0);
     }
-    out
+    if f == 1.0 {
+        return read(i1);
+    }
+    let (a, b) = (read(i0), read(i1));
+    [0, 1, 2].map(|c| between_slices(a[c], b[c], f))
+}
+
+/// One channel between two slices at fraction `f`: geometric, a^(1−f) b^f,
+/// where both are positive, else linear. Sky luminance changes by orders
+/// of magnitude across the twilight slices (about 1.1° apart near −7°,
+/// where it falls tenfold per degree or so); interpolated linearly, its
+/// logarithm would bend at each slice, with local slopes up to
+/// (r − 1) / ln r times the true one for a ratio r between slices (three
+/// times for r = 10): steps a viewer sees. Geometrically, the logarithm is
+/// the chord between slices, whose slope never exceeds the atmosphere's
+/// own steepest (the mean value theorem), and in daylight, where adjacent
+/// slices differ by a few percent, the two agree to a fraction of that.
+pub fn between_slices(a: f64, b: f64, f: f64) -> f64 {
+    if a > 0.0 && b > 0.0 {
+        libm::exp((1.0 - f) * libm::log(a) + f * libm::log(b))
+    } else {
+        (1.0 - f) * a + f * b
+    }
 }
 
 impl Luts {

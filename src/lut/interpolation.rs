@@ -356,6 +356,32 @@ mod tests {
         }
     }
 
+    /// Twilight as the atmosphere does it: luminance falling exponentially
+    /// with the sun's depression, 1.3 e-folds per degree (about what the
+    /// clear sky's zenith does near −6°), faster toward the anti-sun side.
+    struct Dusk;
+    impl SkyModel for Dusk {
+        fn xyz(&self, sun_zenith_deg: f64, d: DVec3) -> [f64; 3] {
+            let depression = (sun_zenith_deg - 90.0).max(0.0);
+            let k = 1.3 - 0.3 * d.x;
+            Smooth.xyz(sun_zenith_deg, d).map(|y| 1000.0 * y * (-k * depression).exp())
+        }
+    }
+
+    /// The twilight test: decoded along the sun from 0 to −10° in
+    /// 0.1° steps, the luminance's consecutive ratios stay within what the
+    /// sky itself does. (With linear interpolation between slices, 1.1°
+    /// apart near −7°, the decoded log Y bends at each slice, its steepest
+    /// step 2.7 times the sky's: this test fails.)
+    #[test]
+    fn twilight_decodes_without_steps() {
+        let layers: Vec<usize> = (mapping::UPPER_SLICES - 1..mapping::SLICES).collect();
+        let (entry, texture) = in_memory_bake(&Dusk, 16, 64, 6371.0, 100.0, 87.5, &layers);
+        let (decoded, model) = twilight_steps(&Dusk, &entry, &texture);
+        assert!(model > 0.1 && model < 0.2, "{model}");
+        assert!(decoded <= model * 1.01, "decoded twilight steps up to {decoded:.4} in log Y per 0.1°, the sky's own {model:.4}");
+    }
+
     #[test]
     fn a_smooth_sky_interpolates_closely_and_a_sharp_aureole_does_not() {
         let dirs = lattice(300);

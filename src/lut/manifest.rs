@@ -5,9 +5,12 @@
 
 use serde::{Deserialize, Serialize};
 
-/// The manifest's format name and version.
+/// The manifest's format name and version. Version 2: between slices the
+/// decoder interpolates geometrically where both values are positive, at
+/// the fraction of the way in sun zenith angle (version 1: linearly, at the
+/// fraction of the slice coordinate), see `decode::between_slices`.
 pub const FORMAT: &str = "sky-lut-manifest";
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
@@ -153,7 +156,7 @@ pub fn direction_mapping() -> DirectionMappingInfo {
         p: P,
         upper: "sun zenith <= threshold: the talk's uvToWorldSpaceDirection, sun-centred branch: phi = u pi, the heading about the sun from the tangent pointing down toward the horizon below it; v' = the nonlinear transform of v (a, b, c, d, p); edge = pi/2 - atan(sin(pi/2 - phi) tan(theta_sun)); theta = v'/0.5 edge for v' <= 0.5, else (v'/0.5 - 1)(pi - edge) + edge; the horizon is the line v = b".into(),
         lower: "sun zenith > threshold: latitude-longitude, zenith angle = pi v'' with v'' = the two-arc transform about K = min(0.5, theta_sun / pi), azimuth from the sun = u pi".into(),
-        interpolation: "the direction's (u, v) from the mapping of the actual sun zenith angle (in each slice's own region), bilinear at texel centres with clamp-to-edge (which is the mirror at u = 0 and 1), each slice times 2^-scale_log2, then linear in the slice coordinate between the two slices around it".into(),
+        interpolation: "the direction's (u, v) from the mapping of the actual sun zenith angle (in each slice's own region), bilinear at texel centres with clamp-to-edge (which is the mirror at u = 0 and 1), each slice times 2^-scale_log2, then between the two slices around it (from the slice coordinate: slices floor(s) and floor(s) + 1) at the fraction f of the way between their sun zenith angles, per RGB channel: geometric, a^(1-f) b^f, where both a and b are positive, else linear, (1-f) a + f b".into(),
     }
 }
 
