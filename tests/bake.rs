@@ -202,3 +202,30 @@ fn lut_verify_reports_every_elevation() {
     }
     assert!(plots.join("twilight_clear.png").exists());
 }
+
+#[test]
+fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
+    let tmp = tempfile::tempdir().unwrap();
+    let atm = root().join("tests/atmospheres/disort_rayleigh_hg.toml");
+    let o = sky(&["lut", "interpolation", atm.to_str().unwrap(), "--size", "8x32", "--directions", "60", "--json"], tmp.path());
+    let r = summary(&o);
+    let regions = r["regions"].as_array().unwrap();
+    // Every slice from 60° sun zenith to the horizon (slices 5 to 47 of the time mapping).
+    assert_eq!(regions.len(), 43, "{r}");
+    for g in regions {
+        for m in ["sun_centred", "latitude_longitude"] {
+            let p99 = g[m]["p99"].as_f64().unwrap();
+            assert!(p99.is_finite() && p99 >= 0.0, "{g}");
+        }
+    }
+    let t = r["measured_threshold_deg"].as_f64().unwrap();
+    assert!((60.0..=90.0).contains(&t), "{t}");
+    assert_eq!(r["between"].as_array().unwrap().len(), 7);
+    for bad in [&["--size", "0x4"][..], &["--directions", "0"], &["--threshold-deg", "91"]] {
+        let mut args = vec!["lut", "interpolation", atm.to_str().unwrap()];
+        args.extend_from_slice(bad);
+        assert_eq!(sky(&args, tmp.path()).status.code(), Some(2), "{bad:?}");
+    }
+    let missing = sky(&["lut", "interpolation", "nope.toml"], tmp.path());
+    assert_eq!(missing.status.code(), Some(1));
+}

@@ -335,6 +335,13 @@ mod tests {
         assert!(unknown.to_string().contains("test-bake.toml:6: unknown field `colour`"), "{unknown}");
         let twice = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n").unwrap_err();
         assert!(twice.to_string().contains("test-bake.toml:7: sky \"a\" appears twice"), "{twice}");
+        let threshold = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\nthreshold_deg = 95.0\n").unwrap_err();
+        assert!(threshold.to_string().contains("test-bake.toml:6: sky \"a\": threshold_deg must be"), "{threshold}");
+        let b =
+            parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\nthreshold_deg = 85.3\n[[sky]]\nname = \"b\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n")
+                .unwrap();
+        assert_eq!(b.skies[0].threshold_deg, 85.3);
+        assert_eq!(b.skies[1].threshold_deg, mapping::default_threshold_deg(32, 128));
     }
 
     #[test]

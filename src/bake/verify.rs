@@ -78,6 +78,29 @@ pub struct ElevationError {
     pub psnr_db: f64,
     /// The reference's own median relative standard error of Y.
     pub reference_median_rel_stderr_y: f64,
+    /// The interpolation part of the error, measured on the atmosphere's
+    /// noise-free single-scattering sky baked in memory at this bake's
+    /// size and threshold (`lut::interpolation`): direction and slice
+    /// interpolation together, and direction interpolation alone (the
+    /// slices read, each at its own sun); the difference is what slice
+    /// interpolation adds. None below the horizon: there the single-
+    /// scattering sky is no proxy (the Earth's shadow gives it sharp edges
+    /// that light scattered more than once fills in).
+    pub interpolation: Option<InterpolationSplit>,
+}
+
+/// See [`ElevationError::interpolation`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct InterpolationSplit {
+    pub median_rel_y: f64,
+    pub p99_rel_y: f64,
+    pub aureole_median_rel_y: Option<f64>,
+    pub direction_only_median_rel_y: f64,
+    pub direction_only_p99_rel_y: f64,
+    /// The median over the directions of the single-scattering sky's Y over
+    /// the reference's: how much of the sky the proxy is (it says little
+    /// where it is a small part, as under thick clouds).
+    pub single_scattering_fraction: f64,
 }
 
 /// One basis sky's verification.
@@ -144,8 +167,14 @@ pub fn verify(
         for &i in &opts.centre_slices {
             elevations.push((90.0 - mapping::slice_sun_zenith_deg(i, entry.planet_radius_km, entry.top_km), true));
         }
+        // The interpolation part of the error, without noise.
+        let model = crate::lut::interpolation::SingleScatteringSky { scene: &session.scene, altitude_km: sky.altitude_m / 1000.0 };
+        let lattice: Vec<glam::DVec3> = dirs.iter().map(|&(z, a)| direction_deg(z, a)).collect();
+        let elevs: Vec<f64> = elevations.iter().map(|e| e.0.max(0.0)).collect();
+        let split = crate::lut::interpolation::split(&model, entry, &elevs, &lattice);
+        use crate::lut::interpolation::SkyModel;
         let mut errors = Vec::new();
-        for (elev, centre) in elevations {
+        for ((elev, centre), (both, direction)) in elevations.into_iter().zip(split) {
             on_reference(&sky.name, elev);
             let view = View {
                 camera: Camera::Directions(dirs.clone()),
@@ -199,6 +228,17 @@ pub fn verify(
                 p99_de2000: percentile(&mut de, 0.99),
                 psnr_db: 10.0 * (peak * peak / (se / n).max(1e-300)).log10(),
                 reference_median_rel_stderr_y: percentile(&mut ref_rel, 0.5),
+                interpolation: (elev >= 0.0).then(|| InterpolationSplit {
+                    single_scattering_fraction: {
+                        let mut f: Vec<f64> = dirs.iter().zip(&reference).filter(|(_, x)| x[1] > 0.0).map(|(&(z, a), x)| model.xyz(90.0 - elev, direction_deg(z, a))[1] / x[1]).collect();
+                        percentile(&mut f, 0.5)
+                    },
+                    median_rel_y: both.median,
+                    p99_rel_y: both.p99,
+                    aureole_median_rel_y: both.aureole_median,
+                    direction_only_median_rel_y: direction.median,
+                    direction_only_p99_rel_y: direction.p99,
+                }),
             });
         }
         let mut noise: Vec<f64> = entry.slices.iter().map(|s| s.median_rel_stderr_y).collect();

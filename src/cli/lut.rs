@@ -293,10 +293,29 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
             pct(s.quantisation_median_rel),
             pct(s.quantisation_p99_rel)
         );
-        outln!("  {:>9} {:>7} {:>9} {:>9} {:>10} {:>10} {:>8} {:>8} {:>7} {:>9}", "sun_elev", "where", "median_Y", "p99_Y", "aureole_m", "aureole_99", "dE00_m", "dE00_99", "PSNR", "ref_noise");
+        outln!(
+            "  {:>9} {:>7} {:>9} {:>9} {:>10} {:>10} {:>8} {:>8} {:>7} {:>9} {:>23} {:>17}",
+            "sun_elev",
+            "where",
+            "median_Y",
+            "p99_Y",
+            "aureole_m",
+            "aureole_99",
+            "dE00_m",
+            "dE00_99",
+            "PSNR",
+            "ref_noise",
+            "interp_m/99 (ss)",
+            "direction_m/99"
+        );
         for e in &s.elevations {
+            let split = |m: f64, p: f64| format!("{:>7.2}%/{:>7.2}%", 100.0 * m, 100.0 * p);
+            let (interp, direction) = match &e.interpolation {
+                Some(i) => (format!("{} ({:.0}%)", split(i.median_rel_y, i.p99_rel_y), 100.0 * i.single_scattering_fraction), split(i.direction_only_median_rel_y, i.direction_only_p99_rel_y)),
+                None => ("n/a".to_string(), "n/a".to_string()),
+            };
             outln!(
-                "  {:>9.2} {:>7} {:>8.2}% {:>8.2}% {:>10} {:>10} {:>8.2} {:>8.2} {:>6.1}dB {:>8.2}%",
+                "  {:>9.2} {:>7} {:>8.2}% {:>8.2}% {:>10} {:>10} {:>8.2} {:>8.2} {:>6.1}dB {:>8.2}% {:>23} {:>17}",
                 e.sun_elevation_deg,
                 if e.slice_centre { "slice" } else { "between" },
                 100.0 * e.median_rel_y,
@@ -306,10 +325,13 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
                 e.median_de2000,
                 e.p99_de2000,
                 e.psnr_db,
-                100.0 * e.reference_median_rel_stderr_y
+                100.0 * e.reference_median_rel_stderr_y,
+                interp,
+                direction
             );
         }
     }
+    outln!("interp: direction and slice interpolation together, direction: direction interpolation alone (median/p99), both measured on the atmosphere's noise-free single-scattering sky baked in memory at the bake's size (`sky lut interpolation`; ss: its share of the sky's luminance, median; n/a below the horizon, where that sky is no proxy)");
     for t in &twilight {
         outln!(
             "{} twilight: largest step of log Y per 0.1 deg decoded {:.4}, the atmosphere's own {:.4}",

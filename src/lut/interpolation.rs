@@ -333,6 +333,29 @@ pub fn measure(model: &dyn SkyModel, width: usize, height: usize, radius_km: f64
     Report { width, height, directions, regions, measured_threshold_deg: measured, threshold_deg: threshold, between, twilight_step_decoded, twilight_step_model }
 }
 
+/// The interpolation part of a bake's error at sun elevations, for a bake
+/// of `model` with the size, planet and threshold of `entry`: for each
+/// elevation, (direction and slice interpolation together, direction
+/// interpolation alone: the worse of the two slices read, each at its own
+/// sun).
+pub fn split(model: &dyn SkyModel, entry: &SkyEntry, elevations_deg: &[f64], dirs: &[DVec3]) -> Vec<(Errors, Errors)> {
+    let (r, top) = (entry.planet_radius_km, entry.top_km);
+    let layers: Vec<usize> = elevations_deg.iter().flat_map(|e| slices_read(90.0 - e, r, top)).collect();
+    let (bake, texture) = in_memory_bake(model, entry.width, entry.height, r, top, entry.threshold_sun_zenith_deg, &layers);
+    elevations_deg
+        .iter()
+        .map(|&e| {
+            let both = decoded_error(model, &bake, &texture, 90.0 - e, dirs);
+            // At a slice's own sun only that slice is read.
+            let read = slices_read(90.0 - e, r, top);
+            let at_centre = (bake.slices[read[0]].sun_zenith_deg - (90.0 - e)).abs() < 1e-9;
+            let own = read.iter().take(if at_centre { 1 } else { 2 }).map(|&i| decoded_error(model, &bake, &texture, bake.slices[i].sun_zenith_deg, dirs));
+            let worse = own.reduce(|a, b| if a.p99 >= b.p99 { a } else { b }).expect("one slice at least");
+            (both, worse)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

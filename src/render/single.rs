@@ -18,8 +18,10 @@
 //! more times is left out, which makes skies of thick media far too dark.
 //!
 //! Quadrature: the midpoint rule on steps whose rise is at most 20 m plus
-//! 2 % of the altitude, and at most 2 km long; the view transmittance is
-//! accumulated along the same steps. `tests` check it against the closed
+//! 2 % of the altitude, and at most 2 km long (or 1 % of the distance
+//! travelled, far along near-horizontal rays), ending where the view ray's
+//! optical depth passes 40; the view transmittance is accumulated along
+//! the same steps. `tests` check it against the closed
 //! form of a plane-parallel Rayleigh slab to 0.1 %.
 
 use super::medium::{ColumnTable, Medium, Spectral};
@@ -27,8 +29,10 @@ use super::Scene;
 use glam::DVec3;
 use std::f64::consts::PI;
 
-/// The longest quadrature step, km.
+/// The longest quadrature step, km (until 1 % of the distance is longer).
 const MAX_STEP_KM: f64 = 2.0;
+/// Optical depth beyond which the view ray is dark: e^−40 ≈ 4e−18.
+const OPAQUE_TAU: f64 = 40.0;
 
 /// Single scattering along view rays of one observer and one sun, for a
 /// set of wavelengths (each `Spectral` carries its own solar irradiance).
@@ -86,7 +90,9 @@ impl<'a> SingleScattering<'a> {
             let p = self.origin + d * s;
             let z = m.altitude(p).max(0.0);
             let mu = m.up(p).dot(d).abs();
-            let ds = ((0.02 + 0.02 * z) / mu.max(1e-9)).min(MAX_STEP_KM).min(end - s);
+            // Far along a near-horizontal ray (in a plane-parallel medium,
+            // arbitrarily long) steps grow with the distance, 1 % of it.
+            let ds = ((0.02 + 0.02 * z) / mu.max(1e-9)).min(MAX_STEP_KM.max(0.01 * s)).min(end - s);
             let x = self.origin + d * (s + 0.5 * ds);
             let zx = m.altitude(x).clamp(0.0, m.top_km);
             self.sun_transmittance(zx, m.up(x).dot(self.sun), &mut t_sun);
@@ -103,6 +109,10 @@ impl<'a> SingleScattering<'a> {
                 tau_view[k] += sigma_t * ds;
             }
             s += ds;
+            if tau_view.iter().all(|&t| t > OPAQUE_TAU) {
+                // Nothing beyond reaches the observer (nor does the ground).
+                return out;
+            }
         }
         if let Some(t_g) = ground {
             let g = self.origin + d * t_g;
