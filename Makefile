@@ -7,7 +7,7 @@ CARGO ?= cargo
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz
+.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures
 
 all: build
 
@@ -107,6 +107,24 @@ cloudy: build
 	done
 	python3 scripts/contact_sheet.py --scale 3 docs/images/cloudy.png 6 \
 	  $(foreach z,30 80,$(foreach c,0 1 2 3 4 5,docs/images/cloudy$(c)_sun$(z).png))
+
+# The README's LUT pictures: what the clear sky's LUT loses by interpolating
+# (`sky lut interpolation --plot`: error fisheyes, slices as stored and
+# decoded, both mappings past the threshold) and a contact sheet of skies
+# decoded from the draft demo bake: rows sun elevation 30, 10, 2, -3 degrees;
+# columns clear, hazed, cloudiness 0.5, cloudiness 1.
+lut-figures: build
+	@mkdir -p docs/images/lut $(OUT)/weather
+	$(SKY) lut interpolation atmospheres/clear.toml --size 32x128 --directions 2000 --plot docs/images/lut > docs/images/lut/clear_32x128.txt
+	$(SKY) lut interpolation atmospheres/hazed.toml --size 32x128 --directions 2000 > docs/images/lut/hazed_32x128.txt
+	[ -f $(OUT)/luts/manifest.json ] || $(SKY) bake-luts bakes/demo.toml --out $(OUT)/luts --quality draft
+	for e in 30 10 2 -3; do \
+	  for w in 0_0 1_0 0_0.5 0_1; do \
+	    $(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg $$e --haziness $${w%_*} --cloudiness $${w#*_} --camera fisheye --size 128x128 \
+	      --out $(OUT)/weather/sky_$${e}_$${w}.exr --png $(OUT)/weather/sky_$${e}_$${w}.png || exit 1; \
+	  done; \
+	done
+	python3 scripts/contact_sheet.py docs/images/lut/weather.png 4 $(foreach e,30 10 2 -3,$(foreach w,0_0 1_0 0_0.5 0_1,$(OUT)/weather/sky_$(e)_$(w).png))
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build

@@ -8,6 +8,7 @@ pub mod colour;
 pub mod colour_error;
 pub mod dds;
 pub mod decode;
+pub mod error_map;
 pub mod interpolation;
 pub mod ktx2;
 pub mod manifest;
