@@ -4,10 +4,13 @@
 # regenerate it).
 
 CARGO ?= cargo
+comma := ,
+empty :=
+space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures
+.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost
 
 all: build
 
@@ -125,6 +128,17 @@ lut-figures: build
 	  done; \
 	done
 	python3 scripts/contact_sheet.py docs/images/lut/weather.png 4 $(foreach e,30 10 2 -3,$(foreach w,0_0 1_0 0_0.5 0_1,$(OUT)/weather/sky_$(e)_$(w).png))
+
+# The measured cost of a final bake (bakes/basis-skies.toml --quality final)
+# without running one: bakes/cost-probe.toml has the same skies and mappings
+# at a sixteenth of the texels; five slices of each are rendered at final
+# quality and scaled (scripts/final_cost.py). Long: tens of minutes on two
+# cores, most of it the thick cloudy skies.
+PROBE_SLICES ?= 0 5 28 53 60
+final-cost: build
+	$(SKY) bake-luts bakes/cost-probe.toml --out $(OUT)/cost-probe --quality final --json \
+	  --slice $(subst $(space),$(comma),$(foreach s,clear hazed cloudy0 cloudy1 cloudy2 cloudy3 cloudy4 cloudy5,$(foreach i,$(PROBE_SLICES),$(s):$(i)))) > $(OUT)/cost-probe.json
+	python3 scripts/final_cost.py $(OUT)/cost-probe.json 16 64
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build

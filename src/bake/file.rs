@@ -355,7 +355,7 @@ mod tests {
             assert_eq!((s.width, s.height, s.slices), (size.0, size.1, 64), "{}", s.name);
         }
         // And the other shipped bakes parse.
-        for f in ["bakes/demo.toml", "bakes/tiny.toml", "tests/bakes/tiny.toml"] {
+        for f in ["bakes/demo.toml", "bakes/tiny.toml", "bakes/cost-probe.toml", "tests/bakes/tiny.toml"] {
             BakeFile::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
         }
     }

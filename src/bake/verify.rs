@@ -117,7 +117,8 @@ pub struct SkyVerification {
     pub quantisation_p99_rel: Option<f64>,
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
+/// The `p` quantile (nearest rank) of `v`, which it sorts; NaN if empty.
+pub(crate) fn percentile(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

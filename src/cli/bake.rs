@@ -206,7 +206,12 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if !a.slice.is_empty() {
         // A part of a bake (a farm manager's task) fills the cache only.
         if a.json {
-            outln!("{}", serde_json::json!({ "slices": a.slice.iter().map(|s| s.to_string()).collect::<Vec<_>>(), "rendered": rendered, "cache": opts.cache.dir() }));
+            let slices: Vec<_> = skies
+                .iter()
+                .flat_map(|s| s.slices.iter().enumerate().filter_map(move |(i, r)| r.as_ref().map(|r| (s, i, r))))
+                .map(|(s, i, r)| serde_json::json!({ "slice": format!("{}:{i}", s.sky.name), "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() }))
+                .collect();
+            outln!("{}", serde_json::json!({ "slices": slices, "rendered": rendered, "cache": opts.cache.dir() }));
         }
         return Ok(ExitCode::SUCCESS);
     }

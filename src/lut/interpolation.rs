@@ -24,6 +24,7 @@
 use super::decode::{sample_sky, Texture};
 use super::manifest::{SkyEntry, SliceEntry};
 use super::mapping::{self, DirectionMapping};
+use crate::bake::verify::percentile;
 use crate::render::camera::direction_deg;
 use crate::render::single::SingleScattering;
 use crate::render::Scene;
@@ -60,14 +61,6 @@ pub struct Errors {
 
 /// Directions this close to the sun are the aureole, reported apart.
 pub const AUREOLE_DEG: f64 = 5.0;
-
-fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
 
 /// Directions in the aureole measured in each case, spread evenly in
 /// solid angle over the ring from the sun disk's edge to [`AUREOLE_DEG`].
