@@ -93,21 +93,15 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
         "- name: \"SkyExecutable\"\n  type: \"STRING\"\n  description: \"The sky command on the farm's hosts (on their PATH, or an absolute path there)\"\n  default: {}",
         q(&d.sky_executable)
     );
-    let _ = writeln!(
-        w,
-        "- name: \"BakeFile\"\n  type: \"PATH\"\n  objectType: \"FILE\"\n  dataFlow: \"IN\"\n  description: \"The bake file (its atmosphere files are found relative to it)\"{}",
-        default_path(&d.bake_file)
-    );
-    let _ = writeln!(
-        w,
-        "- name: \"OutDir\"\n  type: \"PATH\"\n  objectType: \"DIRECTORY\"\n  dataFlow: \"OUT\"\n  description: \"Where Pack writes the LUT files and manifest.json\"\n  default: {}",
-        p(&d.out_dir)
-    );
-    let _ = writeln!(
-        w,
-        "- name: \"CacheDir\"\n  type: \"PATH\"\n  objectType: \"DIRECTORY\"\n  dataFlow: \"INOUT\"\n  description: \"The content-addressed slice cache, shared by every task\"{}",
-        default_path(&d.cache_dir)
-    );
+    // The PATH parameters: name, object type, data flow, description, default.
+    let paths = [
+        ("BakeFile", "FILE", "IN", "The bake file (its atmosphere files are found relative to it)", d.bake_file.clone()),
+        ("OutDir", "DIRECTORY", "OUT", "Where Pack writes the LUT files and manifest.json", Some(d.out_dir.clone())),
+        ("CacheDir", "DIRECTORY", "INOUT", "The content-addressed slice cache, shared by every task", d.cache_dir.clone()),
+    ];
+    for (name, object, flow, description, default) in &paths {
+        let _ = writeln!(w, "- name: {}\n  type: \"PATH\"\n  objectType: {}\n  dataFlow: {}\n  description: {}{}", q(name), q(object), q(flow), q(description), default_path(default));
+    }
     let _ = writeln!(w, "- name: \"Quality\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}", list([q("draft"), q("final")]), q(d.quality.name()));
     let _ = writeln!(w, "- name: \"ColourSpace\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}", list(ColourSpace::ALL.iter().map(|c| q(c.name()))), q(d.colour_space.name()));
     let _ = writeln!(w, "steps:");

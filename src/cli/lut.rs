@@ -195,7 +195,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
                 .flat_map(|y| (0..w).map(move |x| (x, y)))
                 .map(|(x, y)| {
                     let xyz = camera.direction(x as f64 + 0.5, y as f64 + 0.5, w, h).map_or([0.0; 3], |d| luts.sample_xyz(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d));
-                    PixelResult { xyz, xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: Vec::new(), spectral_stderr: Vec::new(), samples: 1, paths_cut: 0 }
+                    PixelResult::from_xyz(xyz)
                 })
                 .collect();
             let image = Image { width: w, height: h, pixels };

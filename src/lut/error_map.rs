@@ -83,7 +83,7 @@ pub fn slice_image(texture: &Texture, layer: usize, zoom: usize) -> Image {
         .map(|i| {
             let (x, y) = ((i % w) / zoom, (i / w) / zoom);
             let t = texture.layers[layer][y * texture.width + x];
-            PixelResult { xyz: t.map(f64::from), xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: Vec::new(), spectral_stderr: Vec::new(), samples: 1, paths_cut: 0 }
+            PixelResult::from_xyz(t.map(f64::from))
         })
         .collect();
     Image { width: w, height: h, pixels }
@@ -92,13 +92,8 @@ pub fn slice_image(texture: &Texture, layer: usize, zoom: usize) -> Image {
 /// A fisheye of a sky given as XYZ toward a direction, for
 /// `render::output::write_png`.
 pub fn sky_fisheye(size: usize, xyz: &(dyn Fn(DVec3) -> [f64; 3] + Sync)) -> Image {
-    let pixels = (0..size * size)
-        .into_par_iter()
-        .map(|i| {
-            let xyz = Camera::Fisheye.direction((i % size) as f64 + 0.5, (i / size) as f64 + 0.5, size, size).map_or([0.0; 3], xyz);
-            PixelResult { xyz, xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: Vec::new(), spectral_stderr: Vec::new(), samples: 1, paths_cut: 0 }
-        })
-        .collect();
+    let pixels =
+        (0..size * size).into_par_iter().map(|i| PixelResult::from_xyz(Camera::Fisheye.direction((i % size) as f64 + 0.5, (i / size) as f64 + 0.5, size, size).map_or([0.0; 3], xyz))).collect();
     Image { width: size, height: size, pixels }
 }
 

@@ -238,6 +238,14 @@ pub struct PixelResult {
     pub paths_cut: u32,
 }
 
+impl PixelResult {
+    /// A pixel known exactly (a decoded or computed sky, not an estimate):
+    /// XYZ alone, no error, one sample.
+    pub fn from_xyz(xyz: [f64; 3]) -> PixelResult {
+        PixelResult { xyz, xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: Vec::new(), spectral_stderr: Vec::new(), samples: 1, paths_cut: 0 }
+    }
+}
+
 /// What every pixel of a render shares, built once per render: one tracer
 /// per band and per spectral line, and the observer.
 pub struct PixelTracers<'a> {

@@ -48,12 +48,7 @@ impl<'a> SingleScattering<'a> {
     /// For the observer at `altitude_km` above the origin of the horizontal
     /// plane and the sun toward `sun` (world frame, z up).
     pub fn new(medium: &'a Medium, columns: &'a ColumnTable, optics: &'a [Spectral], sun: DVec3, altitude_km: f64) -> SingleScattering<'a> {
-        let altitude_km = altitude_km.max(1e-6);
-        let origin = match medium.geometry {
-            crate::atmosphere::Geometry::Spherical => DVec3::new(0.0, 0.0, medium.radius_km + altitude_km),
-            crate::atmosphere::Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
-        };
-        SingleScattering { medium, columns, optics, sun: sun.normalize(), origin }
+        SingleScattering { medium, columns, optics, sun: sun.normalize(), origin: medium.observer(altitude_km) }
     }
 
     /// The scene's bands (radiance per unit solar irradiance, sr⁻¹).
@@ -85,6 +80,7 @@ impl<'a> SingleScattering<'a> {
         let phases: Vec<Vec<f64>> = self.optics.iter().map(|sp| sp.phase.iter().map(|p| p.eval(mu_scatter)).collect()).collect();
         let mut tau_view = vec![0.0; n];
         let mut t_sun = vec![0.0; n];
+        let mut density = vec![0.0; m.components()];
         let mut s = 0.0;
         while s < end {
             let p = self.origin + d * s;
@@ -96,11 +92,14 @@ impl<'a> SingleScattering<'a> {
             let x = self.origin + d * (s + 0.5 * ds);
             let zx = m.altitude(x).clamp(0.0, m.top_km);
             self.sun_transmittance(zx, m.up(x).dot(self.sun), &mut t_sun);
+            for (i, rho) in density.iter_mut().enumerate() {
+                *rho = m.density(i, zx);
+            }
             for (k, sp) in self.optics.iter().enumerate() {
                 let mut sigma_t = 0.0;
                 let mut scatter = 0.0;
                 for i in 0..sp.extinction.len() {
-                    let e = sp.extinction[i] * m.density(i, zx);
+                    let e = sp.extinction[i] * density[i];
                     sigma_t += e;
                     scatter += e * sp.albedo[i] * phases[k][i];
                 }

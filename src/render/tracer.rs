@@ -256,11 +256,7 @@ impl<'a> Tracer<'a> {
     /// A point at `altitude_km` above the origin of the horizontal plane
     /// (at least 1 mm, so rays looking down meet the ground ahead of them).
     pub fn observer(&self, altitude_km: f64) -> DVec3 {
-        let altitude_km = altitude_km.max(1e-6);
-        match self.medium.geometry {
-            Geometry::Spherical => DVec3::new(0.0, 0.0, self.medium.radius_km + altitude_km),
-            Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
-        }
+        self.medium.observer(altitude_km)
     }
 
     #[inline]
