@@ -9,7 +9,7 @@ use sky::render::camera::{direction_deg, Camera};
 use sky::render::medium::Medium;
 use sky::render::rng::Rng;
 use sky::render::tracer::{Estimator, Tracer};
-use sky::render::{self, Scene, Settings, SpectralSettings, View, WavelengthSampling};
+use sky::render::{self, Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -143,6 +143,7 @@ fn renders_are_deterministic_across_threads_and_splits() {
             estimator: Estimator::Full,
             sun_disk: true,
             max_rel_error: None,
+            single_scatter: SingleScatter::default(),
         },
     };
     let cache = MieCache::new(None);
@@ -207,6 +208,7 @@ fn adaptive_sampling_meets_its_target() {
             estimator: Estimator::Full,
             sun_disk: true,
             max_rel_error: Some(target),
+            single_scatter: SingleScatter::default(),
         },
     };
     let cache = MieCache::new(None);

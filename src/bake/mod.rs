@@ -4,6 +4,7 @@
 //! embedded worker or the farm, reporting [`BakeEvent`]s; the packing into
 //! texture arrays and the manifest follow.
 
+pub mod bench;
 pub mod cache;
 pub mod file;
 pub mod openjd;

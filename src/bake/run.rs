@@ -14,7 +14,7 @@ use crate::lut::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
 use crate::render::camera::Camera;
 use crate::render::tracer::Estimator;
-use crate::render::{SpectralSettings, View, WavelengthSampling};
+use crate::render::{SingleScatter, SpectralSettings, View, WavelengthSampling};
 use crate::session::{OpticsCache, Session};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -107,6 +107,7 @@ pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, to
         estimator: Estimator::Full,
         // The disk belongs in the sunlight LUT, not in a texture that tops out at 65024.
         sun_disk: false,
+        single_scatter: SingleScatter::default(),
         max_rel_error: s.max_rel_error,
     }
 }

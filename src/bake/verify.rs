@@ -35,7 +35,7 @@ use crate::lut::{colour_error, mapping};
 use crate::mie::MieCache;
 use crate::render::camera::{direction_deg, Camera};
 use crate::render::tracer::Estimator;
-use crate::render::View;
+use crate::render::{SingleScatter, View};
 use crate::session::{OpticsCache, Session};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -188,6 +188,7 @@ pub fn verify(
                 seed: REFERENCE_SEED,
                 estimator: Estimator::Full,
                 sun_disk: false,
+                single_scatter: SingleScatter::default(),
                 max_rel_error: None,
             };
             let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
@@ -358,6 +359,7 @@ pub fn reference_twilight_step(
             seed: REFERENCE_SEED,
             estimator: Estimator::Full,
             sun_disk: false,
+            single_scatter: SingleScatter::default(),
             max_rel_error: None,
         };
         let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;

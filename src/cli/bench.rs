@@ -7,7 +7,7 @@ use sky::atmosphere::RefractiveIndex;
 use sky::mie::{self, phase, LogNormal};
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
-use sky::render::{self as rend, Scene, Settings, SpectralSettings, View, WavelengthSampling};
+use sky::render::{self as rend, Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
 use sky::table::Table;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -112,6 +112,12 @@ pub enum BenchCommand {
         #[arg(long, default_value_t = 512)]
         spp: u32,
     },
+    /// The projected cost of a final bake, per basis sky and estimator of
+    /// single scattering, in one run: a few slices of each basis sky at a
+    /// subset of their texels, the per-sample noise of Y measured against a
+    /// converged reference, priced at the measured time per path to 1 %
+    /// per texel and summed over the 64 slices
+    Bake(super::bench_bake::BenchBakeArgs),
     /// The farm's overhead and scaling, in one run: a plain local render (no
     /// coordinator) against the embedded worker and against one `sky worker`
     /// process on the same cores; then two single-thread workers against one.
@@ -189,6 +195,7 @@ fn sunset_settings(spp: u32, seed: u64) -> Settings {
             estimator: Estimator::Full,
             sun_disk: true,
             max_rel_error: None,
+            single_scatter: SingleScatter::default(),
         },
     }
 }
@@ -399,6 +406,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
+        BenchCommand::Bake(a) => super::bench_bake::run(a),
         BenchCommand::Farm { atmosphere, size, spp, threads, rounds, json } => {
             use sky::farm::coordinator::WorkerSpec;
             use sky::farm::job::{FarmJob, Optics};

@@ -16,6 +16,7 @@ macro_rules! outln {
 mod atmosphere;
 mod bake;
 mod bench;
+mod bench_bake;
 mod farm_args;
 mod lut;
 mod lut_interpolation;

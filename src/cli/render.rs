@@ -11,7 +11,7 @@ use sky::farm::journal;
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
 use sky::render::tracer::Estimator;
-use sky::render::{self, output, Scene, Settings, SpectralSettings, View, WavelengthSampling};
+use sky::render::{self, output, Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
 use sky::session::{OpticsCache, Session};
 use sky::table::Table;
 use std::collections::BTreeMap;
@@ -33,6 +33,12 @@ enum CameraKind {
     Lut,
     /// A CSV of zenith_deg,azimuth_deg rows (--directions FILE)
     Directions,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum SingleArg {
+    Quadrature,
+    MonteCarlo,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -127,6 +133,9 @@ pub struct RenderArgs {
     /// The naive estimator (analog tracking, no next-event estimation), for comparisons
     #[arg(long, hide = true)]
     naive: bool,
+    /// How sunlight scattered once is estimated: by deterministic quadrature along each pixel's ray (no noise; the lut and directions cameras, whose pixels are single directions) or by the path tracer (always for the jittered cameras)
+    #[arg(long, value_enum, default_value = "quadrature")]
+    single_scatter: SingleArg,
     #[command(flatten)]
     farm: super::farm_args::FarmArgs,
     /// Render this fraction of the columns a second time on another worker and compare bit for bit
@@ -264,6 +273,10 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             estimator: if a.naive { Estimator::Naive } else { Estimator::Full },
             sun_disk: !a.hide_sun_disk,
             max_rel_error: a.max_rel_error,
+            single_scatter: match a.single_scatter {
+                SingleArg::Quadrature => SingleScatter::Quadrature,
+                SingleArg::MonteCarlo => SingleScatter::MonteCarlo,
+            },
         },
     };
     let cancel = Arc::new(AtomicBool::new(false));

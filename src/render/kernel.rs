@@ -376,8 +376,10 @@ impl<'a, const N: usize> Kernel<'a, N> {
                         let den = nee_den(&pk, &nee_r);
                         t_sun = self.sun_transmittance(g, rng);
                         shadowed = t_sun.iter().all(|&t| t == 0.0);
-                        for j in 0..N {
-                            res[j] += f[j] * self.t[j].spectral.ground_albedo / PI * cos_s * t_sun[j] / den;
+                        if !(depth == 0 && h.skip_single) {
+                            for j in 0..N {
+                                res[j] += f[j] * self.t[j].spectral.ground_albedo / PI * cos_s * t_sun[j] / den;
+                            }
                         }
                     }
                     for j in 0..N {
@@ -429,10 +431,13 @@ impl<'a, const N: usize> Kernel<'a, N> {
                         // scattering coefficient), not just the one picked to
                         // continue the path: removes the noise of that choice
                         // where a forward-peaked aerosol sees the sun.
-                        // Skipped when the previous vertex estimated it.
+                        // Skipped when the previous vertex estimated it, or
+                        // at the first vertex when the caller computes single
+                        // scattering by quadrature.
                         t_sun = self.sun_transmittance(c, rng);
                         shadowed = t_sun.iter().all(|&t| t == 0.0);
-                        if !sun_done && !shadowed {
+                        let single_skipped = depth == 0 && h.skip_single;
+                        if !sun_done && !shadowed && !single_skipped {
                             let den = nee_den(&pk, &nee_r);
                             let c_sun = self.scattering_toward(z, d.dot(h.sun_dir));
                             for j in 0..N {

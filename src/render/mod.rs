@@ -58,6 +58,21 @@ pub enum WavelengthSampling {
     Hero,
 }
 
+/// How the sunlight scattered once on its way to the camera (or reflected
+/// once by the ground) is estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+pub enum SingleScatter {
+    /// By the path's next-event estimate toward the sun at its first vertex.
+    MonteCarlo,
+    /// By deterministic quadrature along the pixel's ray over every band
+    /// (`single::SingleScattering`), once per pixel, where a pixel is one
+    /// direction (the `lut` and `directions` cameras); paths then estimate
+    /// only light scattered twice or more. Cameras that jitter within a
+    /// pixel, and the naive estimator, keep Monte Carlo.
+    #[default]
+    Quadrature,
+}
+
 /// What the optics depend on besides the atmosphere: the input of
 /// [`Scene::new`], so that one prepared scene serves any number of views.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -92,12 +107,21 @@ pub struct View {
     /// of its value (see [`adaptive_samples`]); `spp` is then the most a
     /// pixel may take, pilot included.
     pub max_rel_error: Option<f64>,
+    /// How single scattering is estimated (see [`SingleScatter`]).
+    #[serde(default)]
+    pub single_scatter: SingleScatter,
 }
 
 impl View {
     /// Unit vector toward the sun.
     pub fn sun_direction(&self) -> DVec3 {
         camera::direction_deg(self.sun_zenith_deg, self.sun_azimuth_deg)
+    }
+
+    /// Whether single scattering is computed by quadrature in this view
+    /// (see [`SingleScatter::Quadrature`]).
+    pub fn single_by_quadrature(&self) -> bool {
+        self.single_scatter == SingleScatter::Quadrature && self.estimator == Estimator::Full && !self.camera.jitters()
     }
 }
 
@@ -145,6 +169,7 @@ impl Settings {
                 estimator: Estimator::Full,
                 sun_disk,
                 max_rel_error: None,
+                single_scatter: SingleScatter::default(),
             },
         }
     }
@@ -257,7 +282,9 @@ pub struct PixelTracers<'a> {
 impl<'a> PixelTracers<'a> {
     pub fn new(scene: &'a Scene, s: &View) -> PixelTracers<'a> {
         let sun = s.sun_direction();
-        let make = |o: &'a Spectral| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns);
+        let quadrature = s.single_by_quadrature();
+        let make =
+            |o: &'a Spectral| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns).with_single_skipped(quadrature);
         let band: Vec<Tracer> = scene.band_optics.iter().map(make).collect();
         let line: Vec<Tracer> = scene.line_optics.iter().map(make).collect();
         let origin = band.first().or(line.first()).map(|t| t.observer(s.altitude_m / 1000.0));
@@ -299,6 +326,18 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
         _ => None,
     };
     let guide = guide.as_ref();
+    // Single scattering by quadrature (see `SingleScatter`): the same for
+    // every sample of the pixel, so it is added to each, and the moments
+    // measure the noise of the rest.
+    let (single_xyz, single_lines) = match centre {
+        Some(c) if s.single_by_quadrature() => {
+            let (sun, alt_km) = (s.sun_direction(), s.altitude_m / 1000.0);
+            let xyz = if scene.spectral.xyz { single::SingleScattering::bands(scene, sun, alt_km).xyz(&scene.bands.weight, c) } else { [0.0; 3] };
+            let lines = single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km).radiance(c);
+            (xyz, lines)
+        }
+        _ => ([0.0; 3], vec![0.0; nl]),
+    };
     // Band choice and pixel jitter follow low-discrepancy sequences over the
     // sample index (Roberts' R1 and R2 sequences), randomly shifted per pixel
     // (Cranley–Patterson rotation): still a function of (seed, pixel, sample)
@@ -328,7 +367,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
                     let (ld, ls) = (path.direct, path.scattered);
                     acc.cut += path.cut as u32;
                     for c in 0..3 {
-                        let mut v = 0.0;
+                        let mut v = single_xyz[c];
                         for j in 0..HERO_N {
                             // Each position is distributed like one band draw.
                             let w = scene.bands.weight[set.band[j]][c] / set.pdf[j];
@@ -347,7 +386,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
                     let w = &scene.bands.weight[b];
                     let p = scene.bands.pdf[b];
                     for c in 0..3 {
-                        xyz[c].add((ld + ls) * w[c] / p);
+                        xyz[c].add(single_xyz[c] + (ld + ls) * w[c] / p);
                         direct[c] += ld * w[c] / p;
                     }
                 }
@@ -366,7 +405,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
                     acc.any = true;
                     let path = Kernel::single(t).radiance(origin, d, guide, &mut scratch, &mut rng);
                     acc.cut += path.cut as u32;
-                    lines[j].add(path.direct[0] + path.scattered[0]);
+                    lines[j].add(single_lines[j] + path.direct[0] + path.scattered[0]);
                 }
                 None => lines[j].add(0.0),
             }

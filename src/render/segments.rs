@@ -135,6 +135,39 @@ impl Medium {
         }
     }
 
+    /// `ds`, or less: the distance along `d` from `p` to the first altitude
+    /// in `kinks_km` (ascending) that the ray crosses within `ds`, so that
+    /// a quadrature step never straddles a profile's edge.
+    pub(crate) fn clip_at_kinks(&self, p: DVec3, d: DVec3, ds: f64, kinks_km: &[f64]) -> f64 {
+        let (z0, z1) = (self.altitude(p), self.altitude(p + d * ds));
+        // On a sphere the altitude along a chord can dip below both ends.
+        let lo = match self.geometry {
+            Geometry::Spherical => {
+                let t_tangent = -p.dot(d);
+                if t_tangent > 0.0 && t_tangent < ds {
+                    self.altitude(p + d * t_tangent).min(z0.min(z1))
+                } else {
+                    z0.min(z1)
+                }
+            }
+            Geometry::PlaneParallel => z0.min(z1),
+        };
+        let hi = z0.max(z1);
+        let first = kinks_km.partition_point(|&z| z <= lo);
+        let last = kinks_km.partition_point(|&z| z < hi);
+        let mut best = ds;
+        for &zk in &kinks_km[first..last] {
+            for far in [false, true] {
+                if let Some(t) = self.distance_to_altitude(p, d, zk, far) {
+                    if t > 1e-9 && t < best {
+                        best = t;
+                    }
+                }
+            }
+        }
+        best
+    }
+
     /// The distance from `p` along `d` to the ground, or else to the top of
     /// the atmosphere (None when the ray never meets either, as a ray
     /// leaving the top of the atmosphere).

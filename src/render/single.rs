@@ -17,12 +17,18 @@
 //! (`lut::interpolation`). It is not the whole sky: light scattered two or
 //! more times is left out, which makes skies of thick media far too dark.
 //!
-//! Quadrature: the midpoint rule on steps whose rise is at most 20 m plus
-//! 2 % of the altitude, and at most 2 km long (or 1 % of the distance
-//! travelled, far along near-horizontal rays), ending where the view ray's
-//! optical depth passes 40; the view transmittance is accumulated along
-//! the same steps. `tests` check it against the closed
-//! form of a plane-parallel Rayleigh slab to 0.1 %.
+//! Quadrature: steps whose rise is at most 20 m plus 2 % of the altitude,
+//! at most 2 km long (or 1 % of the distance travelled, far along
+//! near-horizontal rays), crossing at most 0.05 of optical depth along the
+//! view or toward the sun, and never straddling a profile's kink (a cloud's
+//! base or top), ending where the view ray's optical depth passes 40. In
+//! each step the coefficients and T_sun are taken at its midpoint and the
+//! view transmittance is integrated exactly (the "energy-conserving"
+//! step of Hillaire 2015, Physically Based and Unified Volumetric
+//! Rendering in Frostbite); the view transmittance is accumulated along
+//! the same steps. `tests` check it against the closed form of a
+//! plane-parallel Rayleigh slab to 0.1 %, and `kernel` tests check it
+//! against the path tracer's Monte Carlo estimate of the same term.
 
 use super::medium::{ColumnTable, Medium, Spectral};
 use super::Scene;
@@ -33,6 +39,12 @@ use std::f64::consts::PI;
 const MAX_STEP_KM: f64 = 2.0;
 /// Optical depth beyond which the view ray is dark: e^−40 ≈ 4e−18.
 const OPAQUE_TAU: f64 = 40.0;
+/// The most optical depth a step may cross, along the view ray or toward
+/// the sun: inside a cloud the integrand changes by e^−0.05 per step.
+const MAX_STEP_TAU: f64 = 0.05;
+/// The sun's cosine below which the step limit toward the sun stops
+/// tightening (the sun near or below the horizon).
+const MIN_MU_SUN: f64 = 0.05;
 
 /// Single scattering along view rays of one observer and one sun, for a
 /// set of wavelengths (each `Spectral` carries its own solar irradiance).
@@ -66,6 +78,11 @@ impl<'a> SingleScattering<'a> {
         }
     }
 
+    /// The largest extinction coefficient of the optics at altitude `z_km`, km⁻¹.
+    fn largest_sigma_t(&self, z_km: f64) -> f64 {
+        self.optics.iter().map(|sp| sp.sigma_t(self.medium, z_km)).fold(0.0, f64::max)
+    }
+
     /// L₁ toward the observer from direction `dir` (pointing away from
     /// the observer), for each optics: W m⁻² sr⁻¹ nm⁻¹ times the optics'
     /// `sun_irradiance` units (sr⁻¹ for per-unit-irradiance bands).
@@ -84,11 +101,23 @@ impl<'a> SingleScattering<'a> {
         let mut s = 0.0;
         while s < end {
             let p = self.origin + d * s;
-            let z = m.altitude(p).max(0.0);
-            let mu = m.up(p).dot(d).abs();
+            let z = m.altitude(p).clamp(0.0, m.top_km);
+            let up = m.up(p);
+            let mu = up.dot(d).abs().max(1e-9);
             // Far along a near-horizontal ray (in a plane-parallel medium,
             // arbitrarily long) steps grow with the distance, 1 % of it.
-            let ds = ((0.02 + 0.02 * z) / mu.max(1e-9)).min(MAX_STEP_KM.max(0.01 * s)).min(end - s);
+            let mut ds = ((0.02 + 0.02 * z) / mu).min(MAX_STEP_KM.max(0.01 * s)).min(end - s);
+            // At most MAX_STEP_TAU of optical depth per step along the view
+            // and toward the sun (which changes by σ_t |Δz| / μ_sun), with
+            // σ_t the largest of the optics' at either end of the step.
+            // Where the last step saw no sunlight (deep in a cloud, in the
+            // Earth's shadow) only the view's limit applies.
+            let mu_sun = up.dot(self.sun).max(MIN_MU_SUN);
+            let sun_factor = if t_sun.iter().any(|&t| t > 1e-9) || s == 0.0 { (mu_sun / mu).min(1.0) } else { 1.0 };
+            let limit = |sigma: f64| if sigma > 0.0 { MAX_STEP_TAU / sigma * sun_factor } else { f64::INFINITY };
+            ds = ds.min(limit(self.largest_sigma_t(z)));
+            ds = ds.min(limit(self.largest_sigma_t(m.altitude(p + d * ds).clamp(0.0, m.top_km))));
+            ds = m.clip_at_kinks(p, d, ds, &m.kinks_km).max(1e-7);
             let x = self.origin + d * (s + 0.5 * ds);
             let zx = m.altitude(x).clamp(0.0, m.top_km);
             self.sun_transmittance(zx, m.up(x).dot(self.sun), &mut t_sun);
@@ -103,9 +132,13 @@ impl<'a> SingleScattering<'a> {
                     sigma_t += e;
                     scatter += e * sp.albedo[i] * phases[k][i];
                 }
-                let t_mid = libm::exp(-(tau_view[k] + 0.5 * sigma_t * ds));
-                out[k] += t_mid * scatter * t_sun[k] * sp.sun_irradiance * ds;
-                tau_view[k] += sigma_t * ds;
+                // ∫ over the step of the view transmittance, exact for the
+                // midpoint's σ_t: (1 − e^(−σ_t ds)) / σ_t (the midpoint
+                // rule's ds e^(−σ_t ds / 2) is 40 % short at σ_t ds = 3).
+                let tau_step = sigma_t * ds;
+                let length = if tau_step > 1e-6 { -libm::expm1(-tau_step) / sigma_t } else { ds * (1.0 - 0.5 * tau_step) };
+                out[k] += libm::exp(-tau_view[k]) * length * scatter * t_sun[k] * sp.sun_irradiance;
+                tau_view[k] += tau_step;
             }
             s += ds;
             if tau_view.iter().all(|&t| t > OPAQUE_TAU) {
@@ -207,5 +240,87 @@ mod tests {
             }
         }
         eprintln!("single scattering against the closed form: worst {:.2e}", worst);
+    }
+
+    /// The quadrature against the path tracer's own Monte Carlo estimate of
+    /// the same term: the sunlight estimate at a path's first vertex (or at
+    /// the ground it reaches first). A path with and without that estimate
+    /// (`Tracer::skip_single`) draws the very same random numbers, so the
+    /// difference of the two, sample by sample, is that estimate alone,
+    /// with its own small variance, and the comparison can see a bias of
+    /// 0.1 % of the whole sky. Cases: clear at a high and low sun and at
+    /// twilight (the lit air above the Earth's shadow), the hazed aureole,
+    /// a thin water cloud (droplets' forward peak, the cloud's edges).
+    /// Each case passes at 4.0 standard errors (a false alarm rate of 6e-5
+    /// each, 1e-3 over the 17 directions: Šidák), and the sum of the
+    /// z-scores must stay within 3.5 √n (false alarm 5e-4). The standard
+    /// errors are about 0.1 % of the sky (0.36 % and 0.57 % at twilight),
+    /// so one direction shows a bias of 0.4 % of the sky, and the sum one
+    /// of 0.1 % common to all directions (Σz would reach 19 > 14.4). Before
+    /// the column table's cubic interpolation the view ray 1° above the
+    /// horizon failed here (z = −4.5: the tracer's view transmittance
+    /// 0.3 % low).
+    #[test]
+    fn quadrature_matches_the_tracers_first_vertex_estimate() {
+        use crate::render::guide::RayGuide;
+        use crate::render::kernel::{Kernel, Scratch};
+        use crate::render::rng::Rng;
+        use crate::render::tracer::{Estimator, Tracer};
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let cases: [(&str, f64, &[(f64, f64)]); 5] = [
+            ("clear", 60.0, &[(0.0, 0.0), (45.0, 180.0), (80.0, 0.0), (89.0, 90.0)]),
+            ("clear", 85.0, &[(30.0, 0.0), (88.0, 0.0), (88.0, 180.0)]),
+            ("clear", 94.0, &[(0.0, 0.0), (85.0, 0.0), (85.0, 180.0)]),
+            ("hazed", 60.0, &[(62.0, 0.0), (75.0, 20.0), (20.0, 180.0)]),
+            ("cloudy1", 60.0, &[(50.0, 0.0), (10.0, 90.0), (80.0, 180.0)]),
+        ];
+        let samples = 20_000u64;
+        let (mut z_sum, mut n, mut worst_power) = (0.0, 0, 0.0f64);
+        for (name, sun_zenith_deg, dirs) in cases {
+            let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
+            let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+            let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+            let sun = direction_deg(sun_zenith_deg, 0.0);
+            let sp = &scene.line_optics[0];
+            let make = |skip: bool| Tracer::new(&scene.medium, sp, sun, 0.533, Estimator::Full).with_sun_disk(false).with_columns(&scene.columns).with_single_skipped(skip);
+            let (full, rest) = (make(false), make(true));
+            let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
+            let origin = full.observer(0.0);
+            let mut scratch = Scratch::default();
+            for (j, &(vz, va)) in dirs.iter().enumerate() {
+                let d = direction_deg(vz, va);
+                let guide = RayGuide::build(&full, origin, d);
+                let (mut m1, mut m2, mut total) = (0.0, 0.0, 0.0);
+                for k in 0..samples {
+                    let a = Kernel::single(&full).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k)).scattered[0];
+                    let b = Kernel::single(&rest).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k)).scattered[0];
+                    let diff = a - b;
+                    m1 += diff;
+                    m2 += diff * diff;
+                    total += a;
+                }
+                let k = samples as f64;
+                let mean = m1 / k;
+                let se = ((m2 / k - mean * mean).max(0.0) / (k - 1.0)).sqrt();
+                let (quad, sky) = (ss.radiance(d)[0], total / k);
+                let z = if se > 0.0 {
+                    (mean - quad) / se
+                } else if mean == quad {
+                    0.0
+                } else {
+                    f64::INFINITY
+                };
+                eprintln!(
+                    "{name} sun {sun_zenith_deg}, view ({vz}, {va}): quadrature {quad:.5e}, Monte Carlo {mean:.5e} ± {se:.1e} (z = {z:+.2}); sky {sky:.4e}, standard error {:.4} % of it",
+                    100.0 * se / sky
+                );
+                assert!(z.abs() < 4.0, "{name} sun {sun_zenith_deg}, view ({vz}, {va}): quadrature {quad:e} against Monte Carlo {mean:e} ± {se:e}");
+                z_sum += z;
+                n += 1;
+                worst_power = worst_power.max(se / sky);
+            }
+        }
+        assert!(z_sum.abs() < 3.5 * (n as f64).sqrt(), "aggregate bias: sum of z = {z_sum:.2} over {n}");
+        eprintln!("worst standard error of the comparison: {:.3} % of the sky", 100.0 * worst_power);
     }
 }

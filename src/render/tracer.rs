@@ -91,6 +91,12 @@ pub struct Tracer<'a> {
     /// [`Tracer::skylight_along`]; on for the full estimator, needs the
     /// column table).
     pub skylight: bool,
+    /// Whether the caller computes the sunlight scattered once toward the
+    /// camera (or reflected once by the ground) itself, by quadrature
+    /// (`single`): the first vertex then skips its next-event estimate
+    /// toward the sun, and paths estimate only light scattered twice or
+    /// more.
+    pub skip_single: bool,
 }
 
 /// Probability of drawing a scattered direction from the sun lobe, when the
@@ -123,6 +129,7 @@ impl<'a> Tracer<'a> {
             columns: None,
             lobe,
             skylight: estimator == Estimator::Full,
+            skip_single: false,
         }
     }
 
@@ -246,6 +253,12 @@ impl<'a> Tracer<'a> {
                 Some(path)
             }
         }
+    }
+
+    /// See [`Tracer::skip_single`].
+    pub fn with_single_skipped(mut self, skip: bool) -> Self {
+        self.skip_single = skip;
+        self
     }
 
     pub fn with_sun_disk(mut self, visible: bool) -> Self {

@@ -1,0 +1,129 @@
+//! `sky bench bake`: the projected cost of a final bake, per basis sky and
+//! estimator, measured on a few slices against converged references (the
+//! measurement itself is `sky::bake::bench`).
+
+use super::{usage, EXIT_INVALID};
+use anyhow::Result;
+use sky::bake::bench::{self, BenchOptions, SliceCost};
+use sky::bake::BakeFile;
+use sky::render::SingleScatter;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
+
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+pub enum MethodArg {
+    Quadrature,
+    MonteCarlo,
+}
+
+#[derive(clap::Args)]
+pub struct BenchBakeArgs {
+    /// The bake file whose basis skies are measured
+    #[arg(default_value = "bakes/basis-skies.toml")]
+    pub bake: PathBuf,
+    /// Basis skies to measure, by name (default: all of the bake's)
+    #[arg(long, value_delimiter = ',')]
+    pub skies: Vec<String>,
+    /// Sun zenith angles of the measured slices, degrees
+    #[arg(long, value_delimiter = ',', default_value = "20,60,85,91,96", allow_hyphen_values = true)]
+    pub sun_zenith_deg: Vec<f64>,
+    /// Measure every N-th texel of a slice in both axes
+    #[arg(long, default_value_t = 4)]
+    pub stride: usize,
+    /// Samples per texel of the measured renders
+    #[arg(long, default_value_t = 256)]
+    pub spp: u32,
+    /// Samples per texel of the reference renders
+    #[arg(long, default_value_t = 4096)]
+    pub reference_spp: u32,
+    /// Estimators of single scattering to compare, in one run
+    #[arg(long, value_delimiter = ',', value_enum, default_value = "monte-carlo,quadrature")]
+    pub methods: Vec<MethodArg>,
+    /// Threads (core-seconds are wall seconds times this; default: all cores)
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Machine-readable output
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn method_name(m: SingleScatter) -> &'static str {
+    match m {
+        SingleScatter::Quadrature => "quadrature",
+        SingleScatter::MonteCarlo => "monte-carlo",
+    }
+}
+
+pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
+    if a.stride == 0 {
+        return usage("--stride must be at least 1");
+    }
+    if a.spp < 2 || a.reference_spp < 2 {
+        return usage("--spp and --reference-spp must be at least 2");
+    }
+    if a.threads == Some(0) {
+        return usage("--threads must be at least 1");
+    }
+    if a.sun_zenith_deg.is_empty() || a.sun_zenith_deg.iter().any(|z| !(0.0..=120.0).contains(z)) {
+        return usage("--sun-zenith-deg: angles between 0 and 120 degrees");
+    }
+    if a.methods.is_empty() {
+        return usage("--methods: at least one");
+    }
+    let bake = match BakeFile::load(&a.bake) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("{e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
+    let o = BenchOptions {
+        skies: a.skies.clone(),
+        sun_zenith_deg: a.sun_zenith_deg.clone(),
+        stride: a.stride,
+        spp: a.spp,
+        reference_spp: a.reference_spp,
+        methods: a.methods.iter().map(|m| if *m == MethodArg::Quadrature { SingleScatter::Quadrature } else { SingleScatter::MonteCarlo }).collect(),
+        threads,
+    };
+    if !a.json {
+        outln!("final-bake cost from every {}th texel, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride, a.spp, a.reference_spp);
+    }
+    let json = a.json;
+    let on_slice = |c: &SliceCost| {
+        if !json {
+            eprintln!(
+                "{:>8} sun {:>5.1}  {:<11} var {:>9.4} ({:>9.4})  ref ±{:.2} %  {:>7.0} spp  {:>9.1} core-s/slice{}",
+                c.sky,
+                c.sun_zenith_deg,
+                method_name(c.method),
+                c.rel_var_vs_reference,
+                c.rel_var_own,
+                100.0 * c.reference_rel_stderr,
+                c.samples_to_target,
+                c.slice_core_seconds_to_target,
+                if c.capped_fraction > 0.0 { format!("  ({:.0} % of texels at the cap)", 100.0 * c.capped_fraction) } else { String::new() }
+            );
+        }
+    };
+    let mie = sky::mie::MieCache::from_env();
+    let report = match bench::run(&bake, &o, &mie, &AtomicBool::new(false), &on_slice) {
+        Ok(r) => r,
+        Err(e @ bench::BenchError::NoSuchSky(_)) => return usage(format!("--skies: {e}")),
+        Err(e) => return Err(e.into()),
+    };
+    if json {
+        outln!("{}", serde_json::to_string_pretty(&report)?);
+        return Ok(ExitCode::SUCCESS);
+    }
+    outln!("projected final bake (64 slices each, at the full slice size), core-hours:");
+    for s in &report.skies {
+        outln!("  {:>8}  {:<11} {:>8.2}", s.sky, method_name(s.method), s.core_hours);
+    }
+    for (m, h) in &report.total_core_hours {
+        outln!("  {:>8}  {:<11} {:>8.2}", "total", method_name(*m), h);
+    }
+    Ok(ExitCode::SUCCESS)
+}
