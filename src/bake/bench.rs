@@ -1,6 +1,6 @@
 //! What a final bake costs, measured rather than guessed (`sky bench bake`):
-//! for each basis sky, a few slices (sun zenith 20, 60, 85, 91 and 96° by
-//! default) rendered through the sky's own LUT mapping on a regular subset
+//! for each basis sky, a few slices (sun zenith 20, 60, 85, 88, 91, 93, 96
+//! and 99° by default: twilight costs most and changes fastest) rendered through the sky's own LUT mapping on a regular subset
 //! of its texels (every `stride`-th in both axes, so the subset spans the
 //! whole slice), once at a fixed sample count per estimator and once as a
 //! reference at many more samples.

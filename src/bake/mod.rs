@@ -28,6 +28,10 @@ pub enum BakeEvent {
     Planned { skies: usize, slices_total: usize, slices_cached: usize, texels_to_render: u64 },
     /// A basis sky's optics are being prepared.
     Preparing { sky: String },
+    /// With adaptive sampling: what the slices' pilots (rendered first, 32
+    /// samples a texel) say the bake will take: every texel's sample count
+    /// exactly, and core-seconds at the pilots' pace.
+    Forecast { core_seconds: f64, samples: u64, planning_core_seconds: f64 },
     /// One slice is done (rendered now, or found in the cache).
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
     /// Every slice of a basis sky is done.

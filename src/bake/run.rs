@@ -14,7 +14,7 @@ use crate::lut::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
 use crate::render::camera::Camera;
 use crate::render::tracer::Estimator;
-use crate::render::{SingleScatter, SpectralSettings, View, WavelengthSampling};
+use crate::render::{adaptive, Image, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
 use crate::session::{OpticsCache, Session};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -112,6 +112,30 @@ pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, to
     }
 }
 
+/// The pilot of an adaptively sampled view: the same view at the pilot's
+/// sample count, fixed; None when the view does not sample adaptively.
+/// A pixel's samples depend only on (seed, pixel, sample), so its pixels
+/// draw the very samples the adaptive render's pilot draws, and the counts
+/// [`planned_samples`] derives from it are the ones the render will take.
+pub fn pilot_view(view: &View) -> Option<View> {
+    view.max_rel_error?;
+    (view.spp > ADAPTIVE_PILOT_SPP).then(|| View { spp: ADAPTIVE_PILOT_SPP, max_rel_error: None, ..view.clone() })
+}
+
+/// The samples each texel of `view` will take, its pilot's included, from
+/// the render of [`pilot_view`].
+pub fn planned_samples(view: &View, pilot: &Image) -> Vec<u32> {
+    let target = view.max_rel_error.unwrap_or(0.0);
+    let left = view.spp.saturating_sub(ADAPTIVE_PILOT_SPP);
+    pilot.pixels.iter().map(|p| if p.samples == 0 { 0 } else { ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left) }).collect()
+}
+
+/// What the pilots say a slice will cost.
+#[derive(Debug, Clone, Copy, Default)]
+struct SliceForecast {
+    core_seconds: f64,
+}
+
 /// Bake-wide progress, updated from the farm's progress of each slice.
 struct Tracker {
     start: Instant,
@@ -121,8 +145,18 @@ struct Tracker {
     slices_done: usize,
     /// The slice being rendered.
     current: (String, usize),
-    /// Seconds spent preparing optics (not rendering), left out of the rate.
+    /// Seconds spent preparing optics and rendering pilots (not the
+    /// slices), left out of the rate.
     prep_s: f64,
+    /// With adaptive sampling, the pilots' forecast: core-seconds of every
+    /// slice to render, of those done, and of the current slice.
+    forecast_total: Option<f64>,
+    forecast_done: f64,
+    forecast_current: f64,
+    current_texels: u64,
+    cores: usize,
+    /// Rendering pilots: the farm's progress is not the bake's.
+    planning: bool,
     sink: Option<BakeSink>,
 }
 
@@ -139,7 +173,21 @@ impl Tracker {
         // The rate of rendering so far (optics preparation left out), once
         // a hundredth of the work gives it meaning.
         let render_s = (elapsed_s - self.prep_s).max(1e-3);
-        let eta_s = (texels_done * 100 >= self.texels_total && texels_done > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / texels_done as f64);
+        let eta_s = match self.forecast_total {
+            // The forecast's core-seconds still to go, over the cores, and
+            // at the pace measured against the forecast so far, the latter
+            // trusted in proportion to the share done (the pilots time each
+            // slice on these very workers; the measured pace takes over what
+            // they got wrong).
+            Some(total) if total > 0.0 => {
+                let done = (self.forecast_done + self.forecast_current * in_slice as f64 / self.current_texels.max(1) as f64).min(total);
+                let left = total - done;
+                let share = done / total;
+                let measured = if done > 0.0 { render_s / done } else { 0.0 };
+                Some(left * ((1.0 - share) / self.cores.max(1) as f64 + share * measured))
+            }
+            _ => (texels_done * 100 >= self.texels_total && texels_done > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / texels_done as f64),
+        };
         BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky: sky.to_string(), index, stalled }
     }
 }
@@ -217,13 +265,75 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         slices_done: slices_cached,
         current: (String::new(), 0),
         prep_s: 0.0,
+        forecast_total: None,
+        forecast_done: 0.0,
+        forecast_current: 0.0,
+        current_texels: 0,
+        cores: opts.cores,
+        planning: false,
         sink: opts.events.clone(),
     }));
     tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, texels_to_render });
 
     let optics = OpticsCache::default();
+    // Every basis sky's session first (optics prepared once), then, where
+    // the quality samples adaptively, every slice's pilot: the forecast
+    // behind the ETA, before the first slice is rendered.
+    let mut sessions: Vec<Option<Session>> = Vec::new();
+    for p in &plan {
+        if !p.views.iter().any(Option::is_some) {
+            sessions.push(None);
+            continue;
+        }
+        tracker.lock().unwrap().emit(BakeEvent::Preparing { sky: p.out.sky.name.clone() });
+        let prep = Instant::now();
+        let session = Session::new(p.atm.clone(), p.bundle.clone(), p.out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {});
+        tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
+        sessions.push(Some(session));
+    }
+    let mut forecasts: Vec<Vec<SliceForecast>> = plan.iter().map(|p| vec![SliceForecast::default(); p.views.len()]).collect();
+    if plan.iter().flat_map(|p| p.views.iter().flatten()).any(|(v, _)| pilot_view(v).is_some()) {
+        let start = Instant::now();
+        tracker.lock().unwrap().planning = true;
+        let (mut total, mut samples) = (0.0, 0u64);
+        for (k, p) in plan.iter().enumerate() {
+            let Some(session) = &sessions[k] else { continue };
+            for (index, v) in p.views.iter().enumerate() {
+                let Some((view, _)) = v else { continue };
+                let Some(pilot) = pilot_view(view) else { continue };
+                if cancel.load(Ordering::SeqCst) {
+                    return Err(BakeError::Cancelled);
+                }
+                tracker.lock().unwrap().current = (p.out.sky.name.clone(), index);
+                // A render's cost is a part per render and per texel (the
+                // job, the first-collision guide, single scattering) and a
+                // part per sample: the pilot and a one-sample render of the
+                // same view tell them apart.
+                let timed = |v: &View| -> Result<(Image, f64), BakeError> {
+                    let t = Instant::now();
+                    let r = session.render_view(v, cancel.clone()).map_err(|source| BakeError::Render { sky: p.out.sky.name.clone(), index, source })?;
+                    Ok((r.image, t.elapsed().as_secs_f64() * opts.cores as f64))
+                };
+                let (image, pilot_core_s) = timed(&pilot)?;
+                let (_, one_core_s) = timed(&View { spp: 1, ..pilot.clone() })?;
+                let texels = (view.width * view.height) as f64;
+                let per_sample = ((pilot_core_s - one_core_s) / ((ADAPTIVE_PILOT_SPP - 1) as f64 * texels)).max(0.0);
+                let fixed = (one_core_s - texels * per_sample).max(0.0);
+                let planned: u64 = planned_samples(view, &image).iter().map(|&n| n as u64).sum();
+                forecasts[k][index].core_seconds = fixed + planned as f64 * per_sample;
+                total += forecasts[k][index].core_seconds;
+                samples += planned;
+            }
+        }
+        let planning_core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
+        let mut t = tracker.lock().unwrap();
+        t.prep_s += start.elapsed().as_secs_f64();
+        t.planning = false;
+        t.forecast_total = Some(total);
+        t.emit(BakeEvent::Forecast { core_seconds: total, samples, planning_core_seconds });
+    }
     let mut done = Vec::new();
-    for Planned { atm, bundle, mut out, views } in plan {
+    for (k, (Planned { mut out, views, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
             if let Some(s) = s {
@@ -238,23 +348,26 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
-        if views.iter().any(Option::is_some) {
-            tracker.lock().unwrap().emit(BakeEvent::Preparing { sky: name.clone() });
-            let prep = Instant::now();
-            let session = Session::new(atm, bundle, out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {});
-            tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
+        if let Some(session) = session {
             for (index, v) in views.into_iter().enumerate() {
                 let Some((view, key)) = v else { continue };
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
-                tracker.lock().unwrap().current = (name.clone(), index);
+                {
+                    let mut t = tracker.lock().unwrap();
+                    t.current = (name.clone(), index);
+                    t.forecast_current = forecasts[k][index].core_seconds;
+                    t.current_texels = (view.width * view.height) as u64;
+                }
                 let slice = render_one(&session, &view, &name, index, opts.cores, cancel.clone())?;
                 opts.cache.put(&key, &slice)?;
                 sky_core_seconds += slice.core_seconds;
                 let mut t = tracker.lock().unwrap();
                 t.texels_before += (view.width * view.height) as u64;
                 t.slices_done += 1;
+                t.forecast_done += forecasts[k][index].core_seconds;
+                t.forecast_current = 0.0;
                 t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
                 let p = t.progress(&name, index, 0, None);
                 t.emit(BakeEvent::Progress(p));
@@ -281,6 +394,7 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
         let t = t.lock().unwrap();
         let (sky, index) = t.current.clone();
         match e {
+            FarmEvent::Progress(_) if t.planning => {}
             FarmEvent::Progress(p) => {
                 let p = t.progress(&sky, index, p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));
@@ -314,4 +428,46 @@ fn render_one(session: &Session, view: &View, sky: &str, index: usize, cores: us
         samples: px.iter().map(|p| p.samples).collect(),
         core_seconds,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::{render, Scene};
+
+    /// The forecast's core: a slice's pilot, rendered on its own, plans
+    /// exactly the samples each texel of the adaptive render then takes.
+    #[test]
+    fn pilots_plan_every_texels_samples_exactly() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
+        let sampling = Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05) };
+        let scene = Scene::new(&atm, &spectral_settings(&sampling), &MieCache::new(None), &|| {});
+        let sky = BasisSky {
+            name: "t".into(),
+            atmosphere: root.join("tests/atmospheres/disort_rayleigh_hg.toml"),
+            width: 4,
+            height: 16,
+            slices: 64,
+            altitude_m: 0.0,
+            threshold_deg: 87.5,
+            line: 1,
+            draft: sampling.clone(),
+            final_: sampling.clone(),
+        };
+        let cancel = AtomicBool::new(false);
+        let mut total = 0u64;
+        for index in [10, 40, 50] {
+            let view = slice_view(&sky, &sampling, index, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg);
+            let pilot = render(&scene, &pilot_view(&view).unwrap(), &cancel, &|| {}).unwrap();
+            let planned = planned_samples(&view, &pilot);
+            let rendered = render(&scene, &view, &cancel, &|| {}).unwrap();
+            let taken: Vec<u32> = rendered.pixels.iter().map(|p| p.samples).collect();
+            assert_eq!(planned, taken, "slice {index}");
+            total += taken.iter().map(|&n| n as u64).sum::<u64>();
+        }
+        // Not every texel at the floor or the cap: the plan has something to predict.
+        assert!(total > 3 * 64 * 64 && total < 3 * 64 * 400, "{total}");
+        assert!(pilot_view(&View { max_rel_error: None, ..slice_view(&sky, &sampling, 0, 6371.0, 100.0, 87.5) }).is_none());
+    }
 }

@@ -104,6 +104,9 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                     eprintln!("sky bake-luts: {sky}: preparing the optics");
                 }
             }
+            BakeEvent::Forecast { core_seconds, samples, planning_core_seconds } => {
+                say(format!("sky bake-luts: the pilots forecast {samples} samples, {:.2} core-hours ({:.2} core-hours spent on them)", core_seconds / 3600.0, planning_core_seconds / 3600.0));
+            }
             BakeEvent::Slice { .. } => {}
             BakeEvent::SkyDone { sky, slices_rendered, slices_cached, core_seconds } => {
                 say(format!(

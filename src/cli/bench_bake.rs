@@ -26,7 +26,7 @@ pub struct BenchBakeArgs {
     #[arg(long, value_delimiter = ',')]
     pub skies: Vec<String>,
     /// Sun zenith angles of the measured slices, degrees
-    #[arg(long, value_delimiter = ',', default_value = "20,60,85,91,96", allow_hyphen_values = true)]
+    #[arg(long, value_delimiter = ',', default_value = "20,60,85,88,91,93,96,99", allow_hyphen_values = true)]
     pub sun_zenith_deg: Vec<f64>,
     /// Measure every N-th texel of a slice in both axes
     #[arg(long, default_value_t = 4)]

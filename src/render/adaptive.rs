@@ -55,14 +55,20 @@ pub const ADAPTIVE_MIN_SPP: u32 = 32;
 /// makes the pixel noisier than the target, never darker on average). The
 /// pilot costs 32 samples a pixel.
 pub fn adaptive_samples(m: &Moments, target: f64, max: u32) -> u32 {
-    let mean = m.mean();
-    let n = if mean > 0.0 && m.n >= 2.0 {
-        let rel_var = (m.stderr() / mean).powi(2) * m.n;
+    samples_for(m.mean(), m.stderr(), m.n, target, max)
+}
+
+/// [`adaptive_samples`] from a pilot's mean, standard error and count (a
+/// `PixelResult` of the pilot alone gives the very same numbers, so a bake
+/// can plan every texel's count before rendering it).
+pub fn samples_for(mean: f64, stderr: f64, n: f64, target: f64, max: u32) -> u32 {
+    let count = if mean > 0.0 && n >= 2.0 {
+        let rel_var = (stderr / mean).powi(2) * n;
         (rel_var / (target * target)).ceil()
     } else {
         0.0
     };
-    (n.min(max as f64) as u32).max(ADAPTIVE_MIN_SPP.min(max))
+    (count.min(max as f64) as u32).max(ADAPTIVE_MIN_SPP.min(max))
 }
 
 #[cfg(test)]
