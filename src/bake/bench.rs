@@ -17,8 +17,9 @@
 //! out). Its ratio κ to the estimator's own figure, n mean (σ_i / Y_i)², says
 //! how honest the latter is; the cost model uses each texel's own variance
 //! times κ. A texel needs n_i = κ v_i / 0.01² samples for a 1 % standard
-//! error of Y, plus the adaptive pilot's 32, up to the final quality's cap;
-//! at the measured time per path plus a per-texel overhead (the first-
+//! error of Y, plus the adaptive pilot's 32 (and what the final quality
+//! spends, its texels stopped at the cap, besides); at the measured time
+//! per path plus a per-texel overhead (the first-
 //! collision guide, single scattering by quadrature: measured by a one-
 //! sample render), that is the slice's cost. A basis sky's 64 slices are
 //! priced by interpolating the cost linearly in sun zenith between the
@@ -81,6 +82,9 @@ pub struct SliceCost {
     /// Mean samples per texel for 1 %, and the full slice's cost at that.
     pub samples_to_target: f64,
     pub slice_core_seconds_to_target: f64,
+    /// What the final quality spends on the slice, its texels stopped at
+    /// the cap (short of 1 % where [`capped_fraction`](Self::capped_fraction) > 0).
+    pub slice_core_seconds_capped: f64,
     /// Texels that would hit the sample cap.
     pub capped_fraction: f64,
 }
@@ -91,15 +95,20 @@ pub struct SkyCost {
     pub sky: String,
     pub method: SingleScatter,
     pub slices: usize,
+    /// To 1 % in every texel.
     pub core_hours: f64,
+    /// What the final quality spends, its texels stopped at the cap.
+    pub capped_core_hours: f64,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct BenchReport {
     pub slices: Vec<SliceCost>,
     pub skies: Vec<SkyCost>,
-    /// Per estimator: the projected final bake of the measured skies, core-hours.
+    /// Per estimator: the projected final bake of the measured skies,
+    /// core-hours, to 1 % and at the cap.
     pub total_core_hours: Vec<(SingleScatter, f64)>,
+    pub total_capped_core_hours: Vec<(SingleScatter, f64)>,
 }
 
 /// What can stop the benchmark.
@@ -183,16 +192,19 @@ fn measure(
     let core_seconds_per_path = ((core_seconds - one_core_seconds) / (subset * (n - 1.0))).max(0.0);
     let overhead = (one_core_seconds / subset - core_seconds_per_path).max(0.0);
     let target2 = TARGET_REL_ERROR * TARGET_REL_ERROR;
-    let (mut samples, mut capped) = (0.0, 0usize);
+    let (mut samples, mut uncapped, mut capped) = (0.0, 0.0, 0usize);
     // As `adaptive_samples` counts them: the pilot, then the estimate's
-    // samples between its floor and what the cap leaves.
+    // samples between its floor and what the cap leaves (and without the
+    // cap: what 1 % takes).
     let left = cap.saturating_sub(ADAPTIVE_PILOT_SPP) as f64;
     for v in &own_each {
         let want = (kappa * v / target2).ceil();
         capped += (want > left) as usize;
         samples += ADAPTIVE_PILOT_SPP as f64 + want.min(left).max((ADAPTIVE_MIN_SPP as f64).min(left));
+        uncapped += ADAPTIVE_PILOT_SPP as f64 + want.max(ADAPTIVE_MIN_SPP as f64);
     }
-    let samples_to_target = samples / m;
+    let samples_to_target = uncapped / m;
+    let samples_capped = samples / m;
     let full = (sky.width * sky.height) as f64;
     ref_rel.sort_by(f64::total_cmp);
     Ok(SliceCost {
@@ -209,6 +221,7 @@ fn measure(
         overhead_core_seconds_per_texel: overhead,
         samples_to_target,
         slice_core_seconds_to_target: full * (overhead + samples_to_target * core_seconds_per_path),
+        slice_core_seconds_capped: full * (overhead + samples_capped * core_seconds_per_path),
         capped_fraction: capped as f64 / m,
     })
 }
@@ -238,29 +251,34 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
     let pool = rayon::ThreadPoolBuilder::new().num_threads(o.threads).build().map_err(|e| BenchError::Threads(e.to_string()))?;
     let mut zeniths = o.sun_zenith_deg.clone();
     zeniths.sort_by(f64::total_cmp);
-    let mut report = BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: o.methods.iter().map(|m| (*m, 0.0)).collect() };
+    let zero: Vec<(SingleScatter, f64)> = o.methods.iter().map(|m| (*m, 0.0)).collect();
+    let mut report = BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero };
     for sky in bake.skies.iter().filter(|s| o.skies.is_empty() || o.skies.contains(&s.name)) {
         let (atm, _) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BenchError::Atmosphere { sky: sky.name.clone(), error })?;
         // The final quality's optics and cap, whatever the bake file's draft.
         let final_ = sky.sampling(Quality::Final).clone();
         let cap = final_.spp;
         let scene = Scene::new(&atm, &spectral_settings(&final_), mie, &|| {});
-        let mut per_method: Vec<Vec<(f64, f64)>> = vec![Vec::new(); o.methods.len()];
+        let mut per_method: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); o.methods.len()];
         for &z in &zeniths {
             let (reference, _) = timed(&pool, o.threads, &scene, &view(sky, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature), cancel)?;
             for (k, &method) in o.methods.iter().enumerate() {
                 let c = measure(sky, z, method, &reference, o, &scene, &pool, cap, cancel)?;
                 on_slice(&c);
-                per_method[k].push((z, c.slice_core_seconds_to_target));
+                per_method[k].push((z, c.slice_core_seconds_to_target, c.slice_core_seconds_capped));
                 report.slices.push(c);
             }
         }
         let slice_zeniths: Vec<f64> = (0..sky.slices).map(|i| mapping::slice_sun_zenith_deg(i, atm.planet.radius_km, atm.planet.top_km)).collect();
         for (k, &method) in o.methods.iter().enumerate() {
-            let seconds: f64 = slice_zeniths.iter().map(|&z| interpolate(&per_method[k], z)).sum();
-            let core_hours = seconds / 3600.0;
+            let price = |pick: fn(&(f64, f64, f64)) -> f64| -> f64 {
+                let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, pick(p))).collect();
+                slice_zeniths.iter().map(|&z| interpolate(&points, z)).sum::<f64>() / 3600.0
+            };
+            let (core_hours, capped_core_hours) = (price(|p| p.1), price(|p| p.2));
             report.total_core_hours[k].1 += core_hours;
-            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours });
+            report.total_capped_core_hours[k].1 += capped_core_hours;
+            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours });
         }
     }
     Ok(report)

@@ -95,7 +95,7 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
     let on_slice = |c: &SliceCost| {
         if !json {
             eprintln!(
-                "{:>8} sun {:>5.1}  {:<11} var {:>9.4} ({:>9.4})  ref ±{:.2} %  {:>7.0} spp  {:>9.1} core-s/slice{}",
+                "{:>8} sun {:>5.1}  {:<11} var {:>9.4} ({:>9.4})  ref ±{:.2} %  {:>8.0} spp  {:>10.1} core-s/slice ({:.1} at the cap){}",
                 c.sky,
                 c.sun_zenith_deg,
                 method_name(c.method),
@@ -104,6 +104,7 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
                 100.0 * c.reference_rel_stderr,
                 c.samples_to_target,
                 c.slice_core_seconds_to_target,
+                c.slice_core_seconds_capped,
                 if c.capped_fraction > 0.0 { format!("  ({:.0} % of texels at the cap)", 100.0 * c.capped_fraction) } else { String::new() }
             );
         }
@@ -118,12 +119,12 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         outln!("{}", serde_json::to_string_pretty(&report)?);
         return Ok(ExitCode::SUCCESS);
     }
-    outln!("projected final bake (64 slices each, at the full slice size), core-hours:");
+    outln!("projected final bake (64 slices each, at the full slice size), core-hours to 1 % in every texel (and what the final quality spends, its texels stopped at the cap):");
     for s in &report.skies {
-        outln!("  {:>8}  {:<11} {:>8.2}", s.sky, method_name(s.method), s.core_hours);
+        outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", s.sky, method_name(s.method), s.core_hours, s.capped_core_hours);
     }
-    for (m, h) in &report.total_core_hours {
-        outln!("  {:>8}  {:<11} {:>8.2}", "total", method_name(*m), h);
+    for ((m, h), (_, c)) in report.total_core_hours.iter().zip(&report.total_capped_core_hours) {
+        outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", "total", method_name(*m), h, c);
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -190,7 +190,7 @@ pub struct SecondaryScratch {
 /// flattened (tracer-major, one value per component) into `out`: μ to the
 /// sun is the same all along the ray (parallel light), so they are
 /// constants of the ray.
-fn phases_to_sun_into(tracers: &[&Tracer], dir: DVec3, out: &mut Vec<f64>) {
+pub(crate) fn phases_to_sun_into(tracers: &[&Tracer], dir: DVec3, out: &mut Vec<f64>) {
     out.clear();
     for t in tracers {
         let sp = t.spectral;
@@ -204,7 +204,7 @@ fn phases_to_sun_into(tracers: &[&Tracer], dir: DVec3, out: &mut Vec<f64>) {
 /// need a column table; 0 without one), with their `phases` toward the sun
 /// (see [`phases_to_sun_into`], `components` per tracer). The column paths
 /// are shared by the bands.
-fn single_scattering(tracers: &[&Tracer], phases: &[f64], components: usize, origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
+pub(crate) fn single_scattering(tracers: &[&Tracer], phases: &[f64], components: usize, origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
     let Some(first) = tracers.first() else { return 0.0 };
     let Some(columns) = first.columns else { return 0.0 };
     let medium = first.medium;

@@ -26,6 +26,7 @@ use super::guide::{RayGuide, SecondaryScratch};
 use super::rng::Rng;
 use super::sampling::{cosine_hemisphere, pick_weighted, sample_phase};
 use super::segments::{Boundary, MajorantSegment, EPS_KM};
+use super::sky_guide::SkylightGuide;
 use super::tracer::{survival_probability, Estimator, PathSample, Tracer, MAX_VERTICES, ROULETTE_FROM_DEPTH};
 use glam::DVec3;
 use std::f64::consts::PI;
@@ -56,12 +57,19 @@ pub struct Kernel<'a, const N: usize> {
     /// (see `hero::shared_majorant_into`), so tentative collisions are
     /// common to all of them.
     majorant: &'a [f64],
+    /// Directions toward the lit air for vertices in the Earth's shadow
+    /// (see `sky_guide` and [`Kernel::guided_skylight`]).
+    sky_guide: Option<&'a SkylightGuide>,
 }
+
+/// The probability of drawing a second skylight direction from the
+/// [`SkylightGuide`] at a vertex in the Earth's shadow.
+pub const SKY_GUIDE_PROBABILITY: f64 = 0.5;
 
 impl<'a> Kernel<'a, 1> {
     /// The kernel of one band, with its own majorant.
     pub fn single(t: &'a Tracer<'a>) -> Kernel<'a, 1> {
-        Kernel { t: [t], majorant: &t.spectral.majorant }
+        Kernel { t: [t], majorant: &t.spectral.majorant, sky_guide: None }
     }
 }
 
@@ -81,7 +89,63 @@ impl<'a, const N: usize> Kernel<'a, N> {
     /// The kernel of N bands with a shared `majorant` (at least each band's
     /// own in every shell).
     pub fn new(t: [&'a Tracer<'a>; N], majorant: &'a [f64]) -> Kernel<'a, N> {
-        Kernel { t, majorant }
+        Kernel { t, majorant, sky_guide: None }
+    }
+
+    /// With a guide toward the lit air for shadowed vertices.
+    pub fn with_sky_guide(mut self, guide: Option<&'a SkylightGuide>) -> Self {
+        self.sky_guide = guide;
+        self
+    }
+
+    /// The probability of the guided skylight technique at a vertex (see
+    /// [`Kernel::guided_skylight`]): [`SKY_GUIDE_PROBABILITY`] in the
+    /// Earth's shadow with a guide, else 0.
+    #[inline]
+    fn sky_guide_beta(&self, shadowed: bool) -> f64 {
+        if shadowed && self.t[0].skylight && self.sky_guide.is_some() {
+            SKY_GUIDE_PROBABILITY
+        } else {
+            0.0
+        }
+    }
+
+    /// At a vertex `x` in the Earth's shadow, with probability β, the
+    /// skylight estimate ([`Kernel::skylight_along`]) along a second
+    /// direction drawn from the [`SkylightGuide`] toward the lit air. It
+    /// and the continuation's own estimate are combined by the balance
+    /// heuristic over the two direction densities, local(w) + β guide(w)
+    /// (Veach 1997, §9.2, with expected sample counts 1 and β), as the sun
+    /// lobe's technique is: this one adds the guided estimate, and the
+    /// continuation's divides by the factors of [`Kernel::guide_factors`].
+    fn guided_skylight(&self, x: DVec3, beta: f64, f: &[f64; N], pk: &[f64; N], local: impl Fn(DVec3) -> ([f64; N], [f64; N]), res: &mut [f64; N], scratch: &mut Scratch, rng: &mut Rng) {
+        let Some(g) = self.sky_guide else { return };
+        if !(beta > 0.0) || rng.uniform() >= beta {
+            return;
+        }
+        let medium = self.t[0].medium;
+        let (w, pdf) = g.sample(medium.up(x), medium.altitude(x), rng);
+        let (factor, density) = local(w);
+        if factor.iter().all(|v| !(*v > 0.0)) {
+            return;
+        }
+        let fl: [f64; N] = std::array::from_fn(|k| f[k] * factor[k]);
+        let pl: [f64; N] = std::array::from_fn(|k| pk[k] * (density[k] + beta * pdf));
+        self.skylight_along(x, w, &fl, &pl, res, scratch, rng);
+    }
+
+    /// The factors (local_k + β guide) / local_k of the continuation
+    /// direction `w` at `x` for its skylight estimate (1 where β = 0).
+    #[inline]
+    fn guide_factors(&self, x: DVec3, beta: f64, local: &[f64; N], w: DVec3) -> [f64; N] {
+        match self.sky_guide {
+            Some(g) if beta > 0.0 => {
+                let medium = self.t[0].medium;
+                let p = beta * g.pdf(medium.up(x), medium.altitude(x), w);
+                std::array::from_fn(|k| if local[k] > 0.0 { 1.0 + p / local[k] } else { 1.0 })
+            }
+            _ => [1.0; N],
+        }
     }
 
     #[inline]
@@ -398,15 +462,21 @@ impl<'a, const N: usize> Kernel<'a, N> {
                         ([c; N], [c; N])
                     };
                     self.lobe_next_event(g, &alphas, &f, &pk, cosine, &mut res, rng);
+                    let beta = self.sky_guide_beta(shadowed);
+                    self.guided_skylight(g, beta, &f, &pk, cosine, &mut res, scratch, rng);
                     let nd = cosine_hemisphere(n, rng);
                     let cos_o = n.dot(nd);
                     if cos_o <= 0.0 {
                         break;
                     }
                     nee_r = self.continuation_factors(&alphas, &[cos_o / PI; N], nd);
+                    let sky_r = self.guide_factors(g, beta, &[cos_o / PI; N], nd);
                     d = nd;
                     p = g;
-                    sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, scratch, rng);
+                    sun_done = shadowed && h.skylight && {
+                        let pk_est: [f64; N] = std::array::from_fn(|k| pk[k] * sky_r[k]);
+                        self.skylight_along(p, d, &f, &pk_est, &mut res, scratch, rng)
+                    };
                 }
                 Event::Collision(c) => {
                     let z = medium.altitude(c);
@@ -457,8 +527,13 @@ impl<'a, const N: usize> Kernel<'a, N> {
                     };
                     let alphas: [f64; N] = std::array::from_fn(|k| self.t[k].lobe_alpha_at(t_sun[k]));
                     self.lobe_next_event(c, &alphas, &f, &pk, scatter, &mut res, rng);
+                    let beta = self.sky_guide_beta(shadowed);
+                    self.guided_skylight(c, beta, &f, &pk, scatter, &mut res, scratch, rng);
                     let nd = sample_phase(&h.spectral.phase[which], d, rng);
-                    if N == 1 && !(alphas[0] > 0.0) {
+                    // The continuation's factors for the guided skylight's
+                    // balance heuristic (see `guided_skylight`).
+                    let mut sky_r = [1.0; N];
+                    if N == 1 && !(alphas[0] > 0.0) && !(beta > 0.0) {
                         // One band: f gains Σσ_s p and pk its ratio to σ_s,
                         // so only σ_s is left; no phase function to evaluate.
                         f[0] *= ss[0];
@@ -470,10 +545,14 @@ impl<'a, const N: usize> Kernel<'a, N> {
                             pk[k] *= local[k];
                         }
                         nee_r = self.continuation_factors(&alphas, &local, nd);
+                        sky_r = self.guide_factors(c, beta, &local, nd);
                     }
                     d = nd;
                     p = c;
-                    sun_done = shadowed && h.skylight && self.skylight_along(p, d, &f, &pk, &mut res, scratch, rng);
+                    sun_done = shadowed && h.skylight && {
+                        let pk_est: [f64; N] = std::array::from_fn(|k| pk[k] * sky_r[k]);
+                        self.skylight_along(p, d, &f, &pk_est, &mut res, scratch, rng)
+                    };
                 }
             }
             // f and pk are products over hundreds of vertices in a thick

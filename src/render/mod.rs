@@ -28,6 +28,7 @@ pub mod rng;
 pub mod sampling;
 pub mod segments;
 pub mod single;
+pub mod sky_guide;
 pub mod tracer;
 
 use crate::atmosphere::Atmosphere;
@@ -277,6 +278,9 @@ pub struct PixelTracers<'a> {
     band: Vec<Tracer<'a>>,
     line: Vec<Tracer<'a>>,
     origin: Option<DVec3>,
+    /// Directions toward the lit air for paths in the Earth's shadow, from
+    /// the band that weighs most in luminance (see `sky_guide`).
+    sky_guide: Option<sky_guide::SkylightGuide>,
 }
 
 impl<'a> PixelTracers<'a> {
@@ -288,7 +292,17 @@ impl<'a> PixelTracers<'a> {
         let band: Vec<Tracer> = scene.band_optics.iter().map(make).collect();
         let line: Vec<Tracer> = scene.line_optics.iter().map(make).collect();
         let origin = band.first().or(line.first()).map(|t| t.observer(s.altitude_m / 1000.0));
-        PixelTracers { band, line, origin }
+        let mut tracers = PixelTracers { band, line, origin, sky_guide: None };
+        if s.estimator == Estimator::Full {
+            tracers.sky_guide = tracers.reference(scene).and_then(sky_guide::SkylightGuide::build);
+        }
+        tracers
+    }
+
+    /// The band that weighs most in luminance (or the first spectral line):
+    /// the guides are built with its optics.
+    fn reference(&self, scene: &Scene) -> Option<&Tracer<'a>> {
+        self.band.iter().zip(&scene.bands.weight).max_by(|a, b| a.1[1].total_cmp(&b.1[1])).map(|(t, _)| t).or(self.line.first())
     }
 }
 
@@ -319,10 +333,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
     // The first-collision guide, from the pixel's central ray at the band
     // that weighs most in luminance (see guide.rs).
     let guide = match (centre, s.estimator) {
-        (Some(c), tracer::Estimator::Full) => {
-            let reference = tracers_band.iter().zip(&scene.bands.weight).max_by(|a, b| a.1[1].total_cmp(&b.1[1])).map(|(t, _)| t).or(tracers_line.first());
-            reference.and_then(|t| guide::RayGuide::build(t, origin, c))
-        }
+        (Some(c), tracer::Estimator::Full) => tracers.reference(scene).and_then(|t| guide::RayGuide::build(t, origin, c)),
         _ => None,
     };
     let guide = guide.as_ref();
@@ -363,7 +374,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
                     let set = scene.bands.hero_set(u_band);
                     let ts: [&Tracer; HERO_N] = std::array::from_fn(|j| &tracers_band[set.band[j]]);
                     hero::shared_majorant_into(std::array::from_fn(|j| ts[j].spectral.majorant.as_slice()), &mut majorant);
-                    let path = hero::HeroTracer::new(ts, &majorant).radiance(origin, d, guide, &mut scratch, &mut rng);
+                    let path = hero::HeroTracer::new(ts, &majorant).with_sky_guide(tracers.sky_guide.as_ref()).radiance(origin, d, guide, &mut scratch, &mut rng);
                     let (ld, ls) = (path.direct, path.scattered);
                     acc.cut += path.cut as u32;
                     for c in 0..3 {
@@ -380,7 +391,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
                 (_, Some(d)) => {
                     acc.any = true;
                     let b = scene.bands.sample(u_band);
-                    let path = Kernel::single(&tracers_band[b]).radiance(origin, d, guide, &mut scratch, &mut rng);
+                    let path = Kernel::single(&tracers_band[b]).with_sky_guide(tracers.sky_guide.as_ref()).radiance(origin, d, guide, &mut scratch, &mut rng);
                     let (ld, ls) = (path.direct[0], path.scattered[0]);
                     acc.cut += path.cut as u32;
                     let w = &scene.bands.weight[b];
@@ -403,7 +414,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
             match s.camera.direction(x as f64 + jx, y as f64 + jy, s.width, s.height) {
                 Some(d) => {
                     acc.any = true;
-                    let path = Kernel::single(t).radiance(origin, d, guide, &mut scratch, &mut rng);
+                    let path = Kernel::single(t).with_sky_guide(tracers.sky_guide.as_ref()).radiance(origin, d, guide, &mut scratch, &mut rng);
                     acc.cut += path.cut as u32;
                     lines[j].add(single_lines[j] + path.direct[0] + path.scattered[0]);
                 }
