@@ -130,6 +130,11 @@ pub fn planned_samples(view: &View, pilot: &Image) -> Vec<u32> {
     pilot.pixels.iter().map(|p| if p.samples == 0 { 0 } else { ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left) }).collect()
 }
 
+/// The first index whose view has `key` (the same view as a later one).
+fn first_with_key<'k>(mut keys: impl Iterator<Item = Option<&'k str>>, key: &str) -> usize {
+    keys.position(|k| k == Some(key)).unwrap_or(usize::MAX)
+}
+
 /// What the pilots say a slice will cost.
 #[derive(Debug, Clone, Copy, Default)]
 struct SliceForecast {
@@ -299,8 +304,11 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             for (index, v) in p.views.iter().enumerate() {
-                let Some((view, _)) = v else { continue };
+                let Some((view, key)) = v else { continue };
                 let Some(pilot) = pilot_view(view) else { continue };
+                if first_with_key(p.views.iter().map(|v| v.as_ref().map(|(_, k)| k.as_str())), key) != index {
+                    continue; // rendered once, under its first index
+                }
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
@@ -348,11 +356,28 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
+        let keys: Vec<Option<String>> = views.iter().map(|v| v.as_ref().map(|(_, key)| key.clone())).collect();
         if let Some(session) = session {
             for (index, v) in views.into_iter().enumerate() {
                 let Some((view, key)) = v else { continue };
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
+                }
+                let first = first_with_key(keys.iter().map(|k| k.as_deref()), &key);
+                if first != index {
+                    // The same view as an earlier slice (47 and 48 are both
+                    // the horizon in the talk's layout): rendered once.
+                    let slice = out.slices[first].clone();
+                    let mut t = tracker.lock().unwrap();
+                    t.texels_before += (view.width * view.height) as u64;
+                    t.slices_done += 1;
+                    if let Some(s) = &slice {
+                        t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
+                    }
+                    drop(t);
+                    out.slices[index] = slice;
+                    out.cached += 1;
+                    continue;
                 }
                 {
                     let mut t = tracker.lock().unwrap();
