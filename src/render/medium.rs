@@ -421,45 +421,52 @@ impl ColumnTable {
 
     /// [`optical_depth`](Self::optical_depth) at a precomputed node.
     pub fn optical_depth_at(&self, n: &ColumnNode, e: &[f64]) -> f64 {
-        let ColumnNode { iz, fz, it, ft, .. } = *n;
-        let nt = self.theta_steps + 1;
         let mut tau = 0.0;
-        for (i, col) in self.columns.iter().enumerate() {
+        for i in 0..self.columns.len() {
             if e[i] == 0.0 {
                 continue;
             }
-            let c00 = col[iz * nt + it];
-            let c01 = col[iz * nt + it + 1];
-            let c10 = col[(iz + 1) * nt + it];
-            let c11 = col[(iz + 1) * nt + it + 1];
-            if !(c00.is_finite() && c01.is_finite() && c10.is_finite() && c11.is_finite()) {
-                // Next to the shadow of the ground: the nearest node decides.
-                let c = [[c00, c01], [c10, c11]][(fz > 0.5) as usize][(ft > 0.5) as usize];
-                if !c.is_finite() {
-                    return f64::INFINITY;
-                }
-                tau += e[i] * c;
-                continue;
+            let c = self.column_at(n, i);
+            if !c.is_finite() {
+                return f64::INFINITY;
             }
-            // Cubic in θ where all four nodes of both rows are finite (the
-            // slant columns' curvature near the horizon made linear
-            // interpolation between 0.18° nodes 5e-4 too large there),
-            // kept within the two bracketing nodes; linear otherwise.
-            let row = |r: usize, lo: f64, hi: f64| -> f64 {
-                let mut v = 0.0;
-                for m in 0..4 {
-                    v += n.wt[m] * col[r * nt + n.jt[m]];
-                }
-                if v.is_finite() {
-                    v.clamp(lo.min(hi), lo.max(hi))
-                } else {
-                    (1.0 - ft) * lo + ft * hi
-                }
-            };
-            let c = (1.0 - fz) * row(iz, c00, c01) + fz * row(iz + 1, c10, c11);
             tau += e[i] * c;
         }
         tau
+    }
+
+    /// The column of component `i` at a node (density units × km);
+    /// infinite in the shadow of the ground. [`optical_depth_at`](Self::optical_depth_at)
+    /// is Σ_i e_i × this, so many wavelengths can share one interpolation
+    /// per component.
+    pub fn column_at(&self, n: &ColumnNode, i: usize) -> f64 {
+        let ColumnNode { iz, fz, it, ft, .. } = *n;
+        let nt = self.theta_steps + 1;
+        let col = &self.columns[i];
+        let c00 = col[iz * nt + it];
+        let c01 = col[iz * nt + it + 1];
+        let c10 = col[(iz + 1) * nt + it];
+        let c11 = col[(iz + 1) * nt + it + 1];
+        if !(c00.is_finite() && c01.is_finite() && c10.is_finite() && c11.is_finite()) {
+            // Next to the shadow of the ground: the nearest node decides.
+            return [[c00, c01], [c10, c11]][(fz > 0.5) as usize][(ft > 0.5) as usize];
+        }
+        // Cubic in θ where all four nodes of both rows are finite (the
+        // slant columns' curvature near the horizon made linear
+        // interpolation between 0.18° nodes 5e-4 too large there), kept
+        // within the two bracketing nodes; linear otherwise.
+        let row = |r: usize, lo: f64, hi: f64| -> f64 {
+            let mut v = 0.0;
+            for m in 0..4 {
+                v += n.wt[m] * col[r * nt + n.jt[m]];
+            }
+            if v.is_finite() {
+                v.clamp(lo.min(hi), lo.max(hi))
+            } else {
+                (1.0 - ft) * lo + ft * hi
+            }
+        };
+        (1.0 - fz) * row(iz, c00, c01) + fz * row(iz + 1, c10, c11)
     }
 
     /// Optical depth of a path made of table columns, Σ added − Σ
