@@ -130,17 +130,6 @@ pub fn planned_samples(view: &View, pilot: &Image) -> Vec<u32> {
     pilot.pixels.iter().map(|p| if p.samples == 0 { 0 } else { ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left) }).collect()
 }
 
-/// The first index whose view has `key` (the same view as a later one).
-fn first_with_key<'k>(mut keys: impl Iterator<Item = Option<&'k str>>, key: &str) -> usize {
-    keys.position(|k| k == Some(key)).unwrap_or(usize::MAX)
-}
-
-/// What the pilots say a slice will cost.
-#[derive(Debug, Clone, Copy, Default)]
-struct SliceForecast {
-    core_seconds: f64,
-}
-
 /// Bake-wide progress, updated from the farm's progress of each slice.
 struct Tracker {
     start: Instant,
@@ -213,6 +202,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         bundle: crate::atmosphere::Bundle,
         out: SkySlices,
         views: Vec<Option<(View, String)>>,
+        /// For a slice whose view an earlier one to render has too (47 and
+        /// 48 are both the horizon in the talk's layout): that slice.
+        same_as: Vec<Option<usize>>,
     }
     let mut plan: Vec<Planned> = Vec::new();
     for sky in &bake.skies {
@@ -221,13 +213,15 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let spectral = spectral_settings(&sampling);
         let (radius_km, top_km) = (atm.planet.radius_km, atm.planet.top_km);
         let threshold_deg = sky.threshold_deg;
-        let mut views = Vec::new();
+        let mut views: Vec<Option<(View, String)>> = Vec::new();
+        let mut same_as = Vec::new();
         let mut slices = Vec::new();
         let mut cached = 0;
         for index in 0..sky.slices {
             let wanted = opts.only.as_ref().is_none_or(|o| o.iter().any(|id| id.sky == sky.name && id.index == index));
             if !wanted {
                 views.push(None);
+                same_as.push(None);
                 slices.push(None);
                 continue;
             }
@@ -235,6 +229,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let key = slice_key(&atm.content_hash, &spectral, &view, opts.quality.name());
             let hit = opts.cache.get(&key);
             cached += hit.is_some() as usize;
+            same_as.push(if hit.is_some() { None } else { views.iter().position(|v| v.as_ref().is_some_and(|(_, k)| *k == key)) });
             views.push(if hit.is_some() { None } else { Some((view, key)) });
             slices.push(hit);
         }
@@ -251,7 +246,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             rendered: 0,
             cached,
         };
-        plan.push(Planned { atm, bundle, out, views });
+        plan.push(Planned { atm, bundle, out, views, same_as });
     }
     if opts.pack_only {
         let missing: Vec<String> = plan.iter().flat_map(|p| p.views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(i, _)| format!("{}:{i}", p.out.sky.name))).collect();
@@ -296,7 +291,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
         sessions.push(Some(session));
     }
-    let mut forecasts: Vec<Vec<SliceForecast>> = plan.iter().map(|p| vec![SliceForecast::default(); p.views.len()]).collect();
+    // What the pilots say each slice will cost, core-seconds.
+    let mut forecasts: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
     if plan.iter().flat_map(|p| p.views.iter().flatten()).any(|(v, _)| pilot_view(v).is_some()) {
         let start = Instant::now();
         tracker.lock().unwrap().planning = true;
@@ -304,9 +300,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             for (index, v) in p.views.iter().enumerate() {
-                let Some((view, key)) = v else { continue };
+                let Some((view, _)) = v else { continue };
                 let Some(pilot) = pilot_view(view) else { continue };
-                if first_with_key(p.views.iter().map(|v| v.as_ref().map(|(_, k)| k.as_str())), key) != index {
+                if p.same_as[index].is_some() {
                     continue; // rendered once, under its first index
                 }
                 if cancel.load(Ordering::SeqCst) {
@@ -328,8 +324,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let per_sample = ((pilot_core_s - one_core_s) / ((ADAPTIVE_PILOT_SPP - 1) as f64 * texels)).max(0.0);
                 let fixed = (one_core_s - texels * per_sample).max(0.0);
                 let planned: u64 = planned_samples(view, &image).iter().map(|&n| n as u64).sum();
-                forecasts[k][index].core_seconds = fixed + planned as f64 * per_sample;
-                total += forecasts[k][index].core_seconds;
+                forecasts[k][index] = fixed + planned as f64 * per_sample;
+                total += forecasts[k][index];
                 samples += planned;
             }
         }
@@ -341,7 +337,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         t.emit(BakeEvent::Forecast { core_seconds: total, samples, planning_core_seconds });
     }
     let mut done = Vec::new();
-    for (k, (Planned { mut out, views, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
+    for (k, (Planned { mut out, views, same_as, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
             if let Some(s) = s {
@@ -356,17 +352,14 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
-        let keys: Vec<Option<String>> = views.iter().map(|v| v.as_ref().map(|(_, key)| key.clone())).collect();
         if let Some(session) = session {
             for (index, v) in views.into_iter().enumerate() {
                 let Some((view, key)) = v else { continue };
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
-                let first = first_with_key(keys.iter().map(|k| k.as_deref()), &key);
-                if first != index {
-                    // The same view as an earlier slice (47 and 48 are both
-                    // the horizon in the talk's layout): rendered once.
+                if let Some(first) = same_as[index] {
+                    // The same view as an earlier slice: rendered once.
                     let slice = out.slices[first].clone();
                     let mut t = tracker.lock().unwrap();
                     t.texels_before += (view.width * view.height) as u64;
@@ -382,7 +375,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 {
                     let mut t = tracker.lock().unwrap();
                     t.current = (name.clone(), index);
-                    t.forecast_current = forecasts[k][index].core_seconds;
+                    t.forecast_current = forecasts[k][index];
                     t.current_texels = (view.width * view.height) as u64;
                 }
                 let slice = render_one(&session, &view, &name, index, opts.cores, cancel.clone())?;
@@ -391,7 +384,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let mut t = tracker.lock().unwrap();
                 t.texels_before += (view.width * view.height) as u64;
                 t.slices_done += 1;
-                t.forecast_done += forecasts[k][index].core_seconds;
+                t.forecast_done += forecasts[k][index];
                 t.forecast_current = 0.0;
                 t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
                 let p = t.progress(&name, index, 0, None);

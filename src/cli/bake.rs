@@ -150,17 +150,17 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
     })
 }
 
+/// The bake file at `path`, or None after printing its located errors
+/// (the caller exits with [`EXIT_INVALID`]).
+pub(super) fn load_bake(path: &std::path::Path) -> Option<BakeFile> {
+    BakeFile::load(path).map_err(|e| eprintln!("{e}")).ok()
+}
+
 pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if a.threads == Some(0) {
         return usage("--threads must be at least 1");
     }
-    let bake = match BakeFile::load(&a.bake) {
-        Ok(b) => b,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
-    };
+    let Some(bake) = load_bake(&a.bake) else { return Ok(ExitCode::from(EXIT_INVALID)) };
     let quality = match a.quality {
         QualityArg::Draft => Quality::Draft,
         QualityArg::Final => Quality::Final,

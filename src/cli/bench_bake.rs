@@ -5,7 +5,6 @@
 use super::{usage, EXIT_INVALID};
 use anyhow::Result;
 use sky::bake::bench::{self, BenchOptions, SliceCost};
-use sky::bake::BakeFile;
 use sky::render::SingleScatter;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -71,13 +70,7 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
     if a.methods.is_empty() {
         return usage("--methods: at least one");
     }
-    let bake = match BakeFile::load(&a.bake) {
-        Ok(b) => b,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
-    };
+    let Some(bake) = super::bake::load_bake(&a.bake) else { return Ok(ExitCode::from(EXIT_INVALID)) };
     let threads = a.threads.unwrap_or_else(rayon::current_num_threads);
     let o = BenchOptions {
         skies: a.skies.clone(),

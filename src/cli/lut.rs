@@ -224,13 +224,7 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
         return usage("--directions and --spp must be at least 1");
     }
     let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
-    let bake = match sky::bake::BakeFile::load(&a.bake) {
-        Ok(b) => b,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
-    };
+    let Some(bake) = super::bake::load_bake(&a.bake) else { return Ok(ExitCode::from(EXIT_INVALID)) };
     let cache_dir = a.cache.clone().unwrap_or_else(|| a.manifest.parent().unwrap_or(std::path::Path::new(".")).join("cache"));
     let cache = cache_dir.is_dir().then(|| sky::bake::SliceCache::open(&cache_dir).ok()).flatten();
     let mie = sky::mie::MieCache::from_env();

@@ -344,7 +344,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
         Some(c) if s.single_by_quadrature() => {
             let (sun, alt_km) = (s.sun_direction(), s.altitude_m / 1000.0);
             let xyz = if scene.spectral.xyz { single::SingleScattering::bands(scene, sun, alt_km).xyz(&scene.bands.weight, c) } else { [0.0; 3] };
-            let lines = single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km).radiance(c);
+            let lines = if nl > 0 { single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km).radiance(c) } else { Vec::new() };
             (xyz, lines)
         }
         _ => ([0.0; 3], vec![0.0; nl]),
