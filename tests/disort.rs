@@ -63,7 +63,8 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
             }
         }
         // A seed per case, so the cases' errors are independent.
-        let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, 2023 + case_index as u64, false);
+        let seed_base: u64 = std::env::var("SKY_TEST_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(2023);
+        let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, seed_base + case_index as u64, false);
         let cache = MieCache::new(None);
         let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let t0 = std::time::Instant::now();
@@ -126,13 +127,22 @@ fn path_tracer_agrees_with_disort_full_grid() {
     check(&st, 2 * 3 * 70, 100, 0.01);
 }
 
-/// Samples per direction of the cloud test, per slab.
+/// Samples per direction of the cloud test, per slab. The thick slabs'
+/// estimates are heavy-tailed (a few paths that reach the cloud top carry
+/// much of the mean), so a mean over few samples is more often below the
+/// truth than above it and the z-scores lean negative: at 8 000 and 4 000
+/// samples the family's aggregate ran between -2.3 and -3.5 with the seed,
+/// at ten times that -1.9. These counts keep the test at about 20 seconds.
 fn cloud_spp(name: &str) -> Option<u32> {
-    Some(match name {
-        "disort-cloud-tau1" => 20_000,
-        "disort-cloud-tau9" => 8_000,
-        _ => 4_000,
-    })
+    let scale: u32 = std::env::var("SKY_TEST_SPP_SCALE").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    Some(
+        scale
+            * match name {
+                "disort-cloud-tau1" => 40_000,
+                "disort-cloud-tau9" => 32_000,
+                _ => 24_000,
+            },
+    )
 }
 
 #[test]
@@ -146,7 +156,7 @@ fn path_tracer_agrees_with_disort_under_clouds() {
 fn path_tracer_agrees_with_disort_under_clouds_full_grid() {
     let zs = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 85.0];
     let az = [0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.0];
-    let st = run("tests/reference/disort_clouds.json", &zs, &az, &|name| cloud_spp(name).map(|n| 25 * n), 0.02);
+    let st = run("tests/reference/disort_clouds.json", &zs, &az, &|name| cloud_spp(name).map(|n| 4 * n), 0.02);
     check(&st, 3 * 3 * 70, 100, 0.02);
 }
 
@@ -163,4 +173,15 @@ fn path_tracer_is_within_two_percent_of_disort_under_thin_clouds() {
     };
     let st = run("tests/reference/disort_clouds.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 180.0], &spp, 0.02);
     check(&st, 2 * 3 * 8, 30, 0.02);
+}
+
+/// The 2 % criterion under the optical depth 60 slab: the CI test's
+/// directions at 4 000 000 samples each, for standard errors near 0.5 %
+/// (about 3 000 core-seconds on this project's machine; `make validate`).
+#[test]
+#[ignore = "the thick cloud slab converged to test the 2 % criterion: long (make validate)"]
+fn path_tracer_is_within_two_percent_of_disort_under_a_thick_cloud() {
+    let spp = |name: &str| (name == "disort-cloud-tau60").then_some(4_000_000);
+    let st = run("tests/reference/disort_clouds.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 180.0], &spp, 0.02);
+    check(&st, 3 * 8, 16, 0.02);
 }
