@@ -99,7 +99,7 @@ sunsets: build
 # 30 (top row) and 80 degrees zenith (bottom row). Thick layers are noisy at
 # these sample counts (see the README).
 CLOUDY_SIZE ?= 32x32
-CLOUDY_SPP ?= 512
+CLOUDY_SPP ?= 2048
 cloudy: build
 	@mkdir -p docs/images $(OUT)
 	for zen in 30 80; do \
