@@ -60,6 +60,8 @@ pub struct Kernel<'a, const N: usize> {
     /// Directions toward the lit air for vertices in the Earth's shadow
     /// (see `sky_guide` and [`Kernel::guided_skylight`]).
     sky_guide: Option<&'a SkylightGuide>,
+    /// [`SKYLIGHT_MAX_EXTINCTION_PER_KM`], or another value in a test.
+    skylight_max_extinction_per_km: f64,
 }
 
 /// The probability of drawing a second skylight direction from the
@@ -69,7 +71,7 @@ pub const SKY_GUIDE_PROBABILITY: f64 = 0.5;
 impl<'a> Kernel<'a, 1> {
     /// The kernel of one band, with its own majorant.
     pub fn single(t: &'a Tracer<'a>) -> Kernel<'a, 1> {
-        Kernel { t: [t], majorant: &t.spectral.majorant, sky_guide: None }
+        Kernel { t: [t], majorant: &t.spectral.majorant, sky_guide: None, skylight_max_extinction_per_km: SKYLIGHT_MAX_EXTINCTION_PER_KM }
     }
 }
 
@@ -104,7 +106,7 @@ impl<'a, const N: usize> Kernel<'a, N> {
     /// The kernel of N bands with a shared `majorant` (at least each band's
     /// own in every shell).
     pub fn new(t: [&'a Tracer<'a>; N], majorant: &'a [f64]) -> Kernel<'a, N> {
-        Kernel { t, majorant, sky_guide: None }
+        Kernel { t, majorant, sky_guide: None, skylight_max_extinction_per_km: SKYLIGHT_MAX_EXTINCTION_PER_KM }
     }
 
     /// With a guide toward the lit air for shadowed vertices.
@@ -117,6 +119,14 @@ impl<'a, const N: usize> Kernel<'a, N> {
     /// [`Kernel::guided_skylight`]): [`SKY_GUIDE_PROBABILITY`] in the
     /// Earth's shadow with a guide, else 0.
     #[inline]
+    /// The skylight estimates everywhere in the shadow, whatever the
+    /// extinction (to test that the limit changes only the cost).
+    #[cfg(test)]
+    pub(crate) fn with_skylight_everywhere(mut self) -> Self {
+        self.skylight_max_extinction_per_km = f64::INFINITY;
+        self
+    }
+
     fn sky_guide_beta(&self, shadowed: bool) -> f64 {
         if shadowed && self.t[0].skylight && self.sky_guide.is_some() {
             SKY_GUIDE_PROBABILITY
@@ -544,7 +554,7 @@ impl<'a, const N: usize> Kernel<'a, N> {
                     self.lobe_next_event(c, &alphas, &f, &pk, scatter, &mut res, rng);
                     // The skylight estimates toward the lit air only where
                     // a free path is long (see `SKYLIGHT_MAX_EXTINCTION_PER_KM`).
-                    let guided = shadowed && self.sigma_t(z).iter().all(|&s| s <= SKYLIGHT_MAX_EXTINCTION_PER_KM);
+                    let guided = shadowed && self.sigma_t(z).iter().all(|&s| s <= self.skylight_max_extinction_per_km);
                     let beta = self.sky_guide_beta(guided);
                     self.guided_skylight(c, beta, &f, &pk, scatter, &mut res, scratch, rng);
                     let nd = sample_phase(&h.spectral.phase[which], d, rng);
