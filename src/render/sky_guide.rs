@@ -200,6 +200,20 @@ mod tests {
         }
     }
 
+    /// A shipped atmosphere's scene with one spectral line at 550 nm.
+    fn line_scene(name: &str) -> Scene {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
+        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+        Scene::new(&atm, &spectral, &MieCache::new(None), &|| {})
+    }
+
+    /// The line's tracer of the sky without the sun's disk and without
+    /// single scattering (what the guides act on), sun at azimuth 0.
+    fn sky_tracer(scene: &Scene, sun_zenith_deg: f64) -> Tracer<'_> {
+        Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full).with_sun_disk(false).with_columns(&scene.columns).with_single_skipped(true)
+    }
+
     /// The guided skylight technique changes only the noise: at twilight
     /// (sun 96° and 93°, clear and hazed skies) paths with and without the
     /// guide agree within the Šidák threshold of the 12 directions (3.5,
@@ -213,16 +227,10 @@ mod tests {
     fn guided_skylight_changes_only_the_noise() {
         use crate::render::guide::RayGuide;
         use crate::render::kernel::{Kernel, Scratch};
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let (mut z_sum, mut n, mut var_off, mut var_on) = (0.0, 0, 0.0, 0.0);
         for (name, sun_zenith_deg) in [("clear", 96.0), ("hazed", 93.0)] {
-            let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
-            let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
-            let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-            let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full)
-                .with_sun_disk(false)
-                .with_columns(&scene.columns)
-                .with_single_skipped(true);
+            let scene = line_scene(name);
+            let t = sky_tracer(&scene, sun_zenith_deg);
             let g = SkylightGuide::build(&t).unwrap();
             let origin = t.observer(0.0);
             let mut scratch = Scratch::default();
@@ -274,16 +282,10 @@ mod tests {
     fn skylight_estimates_inside_clouds_change_only_the_cost() {
         use crate::render::guide::RayGuide;
         use crate::render::kernel::{Kernel, Scratch};
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let (mut z_sum, mut n) = (0.0, 0);
         for (name, sun_zenith_deg) in [("cloudy2", 94.0), ("cloudy5", 88.0)] {
-            let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
-            let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
-            let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-            let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full)
-                .with_sun_disk(false)
-                .with_columns(&scene.columns)
-                .with_single_skipped(true);
+            let scene = line_scene(name);
+            let t = sky_tracer(&scene, sun_zenith_deg);
             // None with the sun above 2° below the horizon.
             let g = SkylightGuide::build(&t);
             let origin = t.observer(0.0);
