@@ -141,12 +141,10 @@ impl Medium {
             // Aerosol extinction is carried per unit of the (possibly relative) profile.
             density.push(raster(1.0, a.profile));
         }
+        let peaks: Vec<f64> = density.iter().map(|d| d.iter().cloned().fold(0.0, f64::max)).collect();
         let mut kinks_km = Vec::new();
         for k in 1..n.saturating_sub(1) {
-            let bends = density.iter().any(|d| {
-                let peak = d.iter().cloned().fold(0.0, f64::max);
-                peak > 0.0 && (d[k - 1] - 2.0 * d[k] + d[k + 1]).abs() > 1e-3 * peak
-            });
+            let bends = density.iter().zip(&peaks).any(|(d, &peak)| peak > 0.0 && (d[k - 1] - 2.0 * d[k] + d[k + 1]).abs() > 1e-3 * peak);
             if bends {
                 kinks_km.push(zs[k]);
             }
