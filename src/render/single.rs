@@ -39,8 +39,8 @@ use std::f64::consts::PI;
 
 /// The longest quadrature step, km (until 1 % of the distance is longer).
 const MAX_STEP_KM: f64 = 2.0;
-/// Optical depth beyond which the view ray is dark: e^−40 ≈ 4e−18.
-const OPAQUE_TAU: f64 = 40.0;
+/// Transmittance below which the view ray is dark: e^−40 ≈ 4e−18.
+const OPAQUE_TRANSMITTANCE: f64 = 4.248354255291589e-18;
 /// The most optical depth a step may cross, along the view ray or toward
 /// the sun: inside a cloud the integrand changes by e^−0.05 per step.
 const MAX_STEP_TAU: f64 = 0.05;
@@ -90,9 +90,14 @@ impl<'a> SingleScattering<'a> {
         }
     }
 
-    /// The largest extinction coefficient of the optics at altitude `z_km`, km⁻¹.
-    fn largest_sigma_t(&self, z_km: f64) -> f64 {
-        self.optics.iter().map(|sp| sp.sigma_t(self.medium, z_km)).fold(0.0, f64::max)
+    /// The largest extinction coefficient of the optics at altitude `z_km`,
+    /// km⁻¹ (the components' densities, interpolated once into `density`,
+    /// shared by the optics: the same sums as `Spectral::sigma_t`).
+    fn largest_sigma_t(&self, z_km: f64, density: &mut [f64]) -> f64 {
+        for (i, rho) in density.iter_mut().enumerate() {
+            *rho = self.medium.density(i, z_km);
+        }
+        self.optics.iter().map(|sp| sp.extinction.iter().zip(density.iter()).map(|(e, rho)| e * rho).sum::<f64>()).fold(0.0, f64::max)
     }
 
     /// L₁ toward the observer from direction `dir` (pointing away from
@@ -107,7 +112,9 @@ impl<'a> SingleScattering<'a> {
         let Some(end) = ground.or_else(|| m.distance_to_altitude(self.origin, d, m.top_km, true)) else { return out };
         let mu_scatter = d.dot(self.sun);
         let phases: Vec<Vec<f64>> = self.optics.iter().map(|sp| sp.phase.iter().map(|p| p.eval(mu_scatter)).collect()).collect();
-        let mut tau_view = vec![0.0; n];
+        // The view's transmittance to the current step, a running product
+        // of each step's e^(−σ_t ds) (which the step's expm1 gives).
+        let mut t_view = vec![1.0; n];
         let mut t_sun = vec![0.0; n];
         let mut density = vec![0.0; m.components()];
         let mut columns = vec![0.0; m.components()];
@@ -128,8 +135,8 @@ impl<'a> SingleScattering<'a> {
             let mu_sun = up.dot(self.sun).max(MIN_MU_SUN);
             let sun_factor = if t_sun.iter().any(|&t| t > 1e-9) || s == 0.0 { (mu_sun / mu).min(1.0) } else { 1.0 };
             let limit = |sigma: f64| if sigma > 0.0 { MAX_STEP_TAU / sigma * sun_factor } else { f64::INFINITY };
-            ds = ds.min(limit(self.largest_sigma_t(z)));
-            ds = ds.min(limit(self.largest_sigma_t(m.altitude(p + d * ds).clamp(0.0, m.top_km))));
+            ds = ds.min(limit(self.largest_sigma_t(z, &mut density)));
+            ds = ds.min(limit(self.largest_sigma_t(m.altitude(p + d * ds).clamp(0.0, m.top_km), &mut density)));
             ds = m.clip_at_kinks(p, d, ds, &m.kinks_km).max(1e-7);
             let x = self.origin + d * (s + 0.5 * ds);
             let zx = m.altitude(x).clamp(0.0, m.top_km);
@@ -149,12 +156,17 @@ impl<'a> SingleScattering<'a> {
                 // midpoint's σ_t: (1 − e^(−σ_t ds)) / σ_t (the midpoint
                 // rule's ds e^(−σ_t ds / 2) is 40 % short at σ_t ds = 3).
                 let tau_step = sigma_t * ds;
-                let length = if tau_step > 1e-6 { -libm::expm1(-tau_step) / sigma_t } else { ds * (1.0 - 0.5 * tau_step) };
-                out[k] += libm::exp(-tau_view[k]) * length * scatter * t_sun[k] * sp.sun_irradiance;
-                tau_view[k] += tau_step;
+                let (length, t_step) = if tau_step > 1e-6 {
+                    let e = libm::expm1(-tau_step);
+                    (-e / sigma_t, 1.0 + e)
+                } else {
+                    (ds * (1.0 - 0.5 * tau_step), libm::exp(-tau_step))
+                };
+                out[k] += t_view[k] * length * scatter * t_sun[k] * sp.sun_irradiance;
+                t_view[k] *= t_step;
             }
             s += ds;
-            if tau_view.iter().all(|&t| t > OPAQUE_TAU) {
+            if t_view.iter().all(|&t| t < OPAQUE_TRANSMITTANCE) {
                 // Nothing beyond reaches the observer (nor does the ground).
                 return out;
             }
@@ -165,7 +177,7 @@ impl<'a> SingleScattering<'a> {
             if cos_sun > 0.0 {
                 self.sun_transmittance(0.0, cos_sun, &mut columns, &mut t_sun);
                 for (k, sp) in self.optics.iter().enumerate() {
-                    out[k] += libm::exp(-tau_view[k]) * sp.ground_albedo / PI * cos_sun * t_sun[k] * sp.sun_irradiance;
+                    out[k] += t_view[k] * sp.ground_albedo / PI * cos_sun * t_sun[k] * sp.sun_irradiance;
                 }
             }
         }
