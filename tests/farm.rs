@@ -670,3 +670,27 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
         assert!(*request_bytes < optics_bytes + 2_000 * tasks, "worker {addr}: {request_bytes} bytes for {tasks} tasks");
     }
 }
+
+/// `sky bake-luts` over two `sky worker` daemons: each basis sky's slices
+/// go to the farm as one job (a strip of slices), and the baked files are
+/// byte-identical to those of the embedded worker.
+#[test]
+fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
+    let mut farm = Farm::new();
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    let bake = root().join("tests/bakes/tiny.toml");
+    let bake_to = |out: &str, farm_args: &[String]| {
+        let o = Command::new(SKY).args(["bake-luts", bake.to_str().unwrap(), "--out", farm.path(out).to_str().unwrap(), "--json"]).args(farm_args).env("SKY_CACHE_DIR", "off").output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+    };
+    let on_farm = bake_to("farm", &["--workers".to_string(), farm.list(&[a, b]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    bake_to("local", &[]);
+    for k in on_farm["skies"].as_array().unwrap() {
+        assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(63), Some(1)), "{on_farm}");
+    }
+    for f in ["clear.ktx2", "hazed.ktx2", "manifest.json"] {
+        assert!(std::fs::read(farm.path("farm").join(f)).unwrap() == std::fs::read(farm.path("local").join(f)).unwrap(), "{f} differs between the farm's bake and the embedded worker's");
+    }
+}

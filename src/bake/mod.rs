@@ -92,6 +92,10 @@ pub enum BakeError {
     Cache(#[from] cache::CacheError),
     #[error("basis sky {sky}, slice {index}: {source}")]
     Render { sky: String, index: usize, source: crate::farm::coordinator::FarmError },
+    #[error("basis sky {sky}, slices {first} to {last}: {source}")]
+    RenderSlices { sky: String, first: usize, last: usize, source: crate::farm::coordinator::FarmError },
+    #[error("the bake's journal: {0}")]
+    Journal(crate::farm::journal::JournalError),
     #[error("--slice {0}: no such basis sky or slice (NAME:INDEX, INDEX from 0 to 63)")]
     NoSuchSlice(String),
     #[error("basis sky {sky}, slice {index}, texel (u {u}, v {v}): {what} is not finite")]

@@ -3,6 +3,14 @@
 //! sun disk hidden, each slice taken from the cache when it is there and
 //! rendered through a [`Session`] (optics prepared once per basis sky) when
 //! it is not.
+//!
+//! The slices a basis sky has to render go to the farm as one job, a strip
+//! of slices side by side ([`Camera::LutStrip`]): workers take columns
+//! from one queue across the slices and wait only at the end of a basis
+//! sky, not at the end of every slice. The strip's columns are journaled
+//! in the cache folder, so a bake killed in the middle of a basis sky
+//! resumes from the columns it had; its slices go into the cache once the
+//! strip is done.
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BakeFile, BasisSky, Quality, Sampling};
@@ -10,12 +18,14 @@ use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
 use crate::atmosphere::Atmosphere;
 use crate::farm::coordinator::{Options, WorkerSpec};
 use crate::farm::events::{EventSink, FarmEvent};
+use crate::farm::journal::{Header, Journal};
 use crate::lut::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
 use crate::render::camera::Camera;
 use crate::render::tracer::Estimator;
 use crate::render::{adaptive, Image, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
 use crate::session::{OpticsCache, Session};
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
@@ -85,6 +95,9 @@ pub struct SkySlices {
     pub slices: Vec<Option<RenderedSlice>>,
     pub rendered: usize,
     pub cached: usize,
+    /// Columns of this sky's strip taken from the journal of a bake that
+    /// was stopped (the rest of the strip was rendered now).
+    pub columns_resumed: u32,
 }
 
 /// The spectral settings of a preset: hero-wavelength sampling, XYZ only.
@@ -137,8 +150,10 @@ struct Tracker {
     texels_before: u64,
     slices_total: usize,
     slices_done: usize,
-    /// The slice being rendered.
+    /// The slice being rendered (or planned).
     current: (String, usize),
+    /// The strip of slices being rendered: one farm job.
+    job: Option<StripJob>,
     /// Seconds spent preparing optics and rendering pilots (not the
     /// slices), left out of the rate.
     prep_s: f64,
@@ -146,8 +161,6 @@ struct Tracker {
     /// slice to render, of those done, and of the current slice.
     forecast_total: Option<f64>,
     forecast_done: f64,
-    forecast_current: f64,
-    current_texels: u64,
     cores: usize,
     /// Rendering pilots: the farm's progress is not the bake's.
     planning: bool,
@@ -161,9 +174,19 @@ impl Tracker {
         }
     }
 
-    fn progress(&self, sky: &str, index: usize, in_slice: u64, stalled: Option<String>) -> BakeProgress {
+    /// Progress with `in_job` texels of the current strip done; the slice
+    /// they reach becomes the current one.
+    fn progress(&mut self, in_job: u64, stalled: Option<String>) -> BakeProgress {
         let elapsed_s = self.start.elapsed().as_secs_f64();
-        let texels_done = (self.texels_before + in_slice).min(self.texels_total);
+        let texels_done = (self.texels_before + in_job).min(self.texels_total);
+        let in_forecast = match &self.job {
+            Some(j) => {
+                self.current = (j.sky.clone(), j.slice_at(in_job));
+                j.forecast_at(in_job)
+            }
+            None => 0.0,
+        };
+        let (sky, index) = self.current.clone();
         // The rate of rendering so far (optics preparation left out), once
         // a hundredth of the work gives it meaning.
         let render_s = (elapsed_s - self.prep_s).max(1e-3);
@@ -174,7 +197,7 @@ impl Tracker {
             // slice on these very workers; the measured pace takes over what
             // they got wrong).
             Some(total) if total > 0.0 => {
-                let done = (self.forecast_done + self.forecast_current * in_slice as f64 / self.current_texels.max(1) as f64).min(total);
+                let done = (self.forecast_done + in_forecast).min(total);
                 let left = total - done;
                 let share = done / total;
                 let measured = if done > 0.0 { render_s / done } else { 0.0 };
@@ -182,8 +205,59 @@ impl Tracker {
             }
             _ => (texels_done * 100 >= self.texels_total && texels_done > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / texels_done as f64),
         };
-        BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky: sky.to_string(), index, stalled }
+        BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky, index, stalled }
     }
+}
+
+/// The slices of one basis sky rendered as one farm job: a strip of
+/// `indices.len()` slices, each `slice_width` columns wide.
+struct StripJob {
+    sky: String,
+    indices: Vec<usize>,
+    slice_width: usize,
+    height: usize,
+    /// The pilots' forecast of the slices before each one (core-seconds),
+    /// `indices.len() + 1` values.
+    cumulative_forecast: Vec<f64>,
+}
+
+impl StripJob {
+    /// Where `texels` done put the farm in the strip, in slices: the farm
+    /// hands out columns from the left, so the texels done are mostly the
+    /// leftmost ones (those in flight make this approximate).
+    fn position(&self, texels: u64) -> f64 {
+        (texels as f64 / (self.height * self.slice_width).max(1) as f64).min(self.indices.len() as f64)
+    }
+
+    fn slice_at(&self, texels: u64) -> usize {
+        self.indices[(self.position(texels) as usize).min(self.indices.len() - 1)]
+    }
+
+    /// The forecast core-seconds of the strip's texels done.
+    fn forecast_at(&self, texels: u64) -> f64 {
+        let x = self.position(texels);
+        let k = (x as usize).min(self.indices.len() - 1);
+        let c = &self.cumulative_forecast;
+        c[k] + (x - k as f64) * (c[k + 1] - c[k])
+    }
+}
+
+/// The strip of `views` (LUT slices of one basis sky, same size and
+/// sampling) side by side: one farm job (see [`Camera::LutStrip`]). A
+/// single view is its own strip.
+pub fn strip_view(views: &[&View]) -> View {
+    let first = views[0].clone();
+    if views.len() == 1 {
+        return first;
+    }
+    let mappings = views
+        .iter()
+        .map(|v| match &v.camera {
+            Camera::Lut { mapping, .. } => *mapping,
+            other => panic!("a strip of LUT slices got a {other:?} camera"),
+        })
+        .collect();
+    View { camera: Camera::LutStrip { mappings, sun_azimuth_deg: first.sun_azimuth_deg }, width: first.width * views.len(), ..first }
 }
 
 /// Renders (or finds in the cache) every slice the options ask for, basis
@@ -245,6 +319,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             slices,
             rendered: 0,
             cached,
+            columns_resumed: 0,
         };
         plan.push(Planned { atm, bundle, out, views, same_as });
     }
@@ -264,11 +339,10 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         slices_total,
         slices_done: slices_cached,
         current: (String::new(), 0),
+        job: None,
         prep_s: 0.0,
         forecast_total: None,
         forecast_done: 0.0,
-        forecast_current: 0.0,
-        current_texels: 0,
         cores: opts.cores,
         planning: false,
         sink: opts.events.clone(),
@@ -353,45 +427,62 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         }
         let mut sky_core_seconds = 0.0;
         if let Some(session) = session {
-            for (index, v) in views.into_iter().enumerate() {
-                let Some((view, key)) = v else { continue };
+            // Every view to render, once: one strip, one farm job, so that
+            // workers go from slice to slice without waiting at each.
+            let todo: Vec<usize> = (0..views.len()).filter(|&i| views[i].is_some() && same_as[i].is_none()).collect();
+            if !todo.is_empty() {
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
-                if let Some(first) = same_as[index] {
-                    // The same view as an earlier slice: rendered once.
-                    let slice = out.slices[first].clone();
-                    let mut t = tracker.lock().unwrap();
-                    t.texels_before += (view.width * view.height) as u64;
-                    t.slices_done += 1;
-                    if let Some(s) = &slice {
-                        t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
-                    }
-                    drop(t);
-                    out.slices[index] = slice;
-                    out.cached += 1;
-                    continue;
-                }
+                let slice_views: Vec<&View> = todo.iter().map(|&i| &views[i].as_ref().expect("to render").0).collect();
+                let strip = strip_view(&slice_views);
+                let (w, h) = (slice_views[0].width, slice_views[0].height);
                 {
+                    let mut cumulative = vec![0.0];
+                    for &i in &todo {
+                        cumulative.push(cumulative.last().unwrap() + forecasts[k][i]);
+                    }
                     let mut t = tracker.lock().unwrap();
-                    t.current = (name.clone(), index);
-                    t.forecast_current = forecasts[k][index];
-                    t.current_texels = (view.width * view.height) as u64;
+                    t.current = (name.clone(), todo[0]);
+                    t.job = Some(StripJob { sky: name.clone(), indices: todo.clone(), slice_width: w, height: h, cumulative_forecast: cumulative });
                 }
-                let slice = render_one(&session, &view, &name, index, opts.cores, cancel.clone())?;
-                opts.cache.put(&key, &slice)?;
-                sky_core_seconds += slice.core_seconds;
+                let (image, core_seconds, resumed) = render_strip(&session, &strip, &opts.cache, &name, &todo, opts.cores, cancel.clone())?;
+                out.columns_resumed += resumed;
+                sky_core_seconds += core_seconds;
+                // The strip's cost shared by the slices in proportion to their samples.
+                let samples: Vec<u64> = (0..todo.len()).map(|j| (0..h).flat_map(|y| &image.pixels[y * image.width + j * w..y * image.width + (j + 1) * w]).map(|p| p.samples as u64).sum()).collect();
+                let all_samples = samples.iter().sum::<u64>().max(1) as f64;
+                for (j, &index) in todo.iter().enumerate() {
+                    let (view, key) = views[index].as_ref().expect("to render");
+                    let slice = slice_of_strip(&image, j * w, view, &name, index, core_seconds * samples[j] as f64 / all_samples)?;
+                    opts.cache.put(key, &slice)?;
+                    let mut t = tracker.lock().unwrap();
+                    t.texels_before += (w * h) as u64;
+                    t.slices_done += 1;
+                    t.forecast_done += forecasts[k][index];
+                    t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
+                    drop(t);
+                    out.slices[index] = Some(slice);
+                    out.rendered += 1;
+                }
                 let mut t = tracker.lock().unwrap();
-                t.texels_before += (view.width * view.height) as u64;
-                t.slices_done += 1;
-                t.forecast_done += forecasts[k][index];
-                t.forecast_current = 0.0;
-                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
-                let p = t.progress(&name, index, 0, None);
+                t.job = None;
+                let p = t.progress(0, None);
                 t.emit(BakeEvent::Progress(p));
+            }
+            // The same view as an earlier slice: rendered once.
+            for (index, first) in same_as.iter().enumerate() {
+                let Some(first) = *first else { continue };
+                let slice = out.slices[first].clone();
+                let mut t = tracker.lock().unwrap();
+                t.texels_before += (out.sky.width * out.sky.height) as u64;
+                t.slices_done += 1;
+                if let Some(s) = &slice {
+                    t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
+                }
                 drop(t);
-                out.slices[index] = Some(slice);
-                out.rendered += 1;
+                out.slices[index] = slice;
+                out.cached += 1;
             }
         }
         if out.slices.iter().any(Option::is_some) {
@@ -409,37 +500,65 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
     let mut farm = opts.farm.clone();
     let t = tracker.clone();
     farm.events = Some(EventSink::new(move |e| {
-        let t = t.lock().unwrap();
-        let (sky, index) = t.current.clone();
+        let mut t = t.lock().unwrap();
         match e {
             FarmEvent::Progress(_) if t.planning => {}
             FarmEvent::Progress(p) => {
-                let p = t.progress(&sky, index, p.pixels_done, p.stalled.clone());
+                let p = t.progress(p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));
             }
-            other => t.emit(BakeEvent::Farm { sky, index, farm: other.clone() }),
+            other => {
+                let (sky, index) = t.current.clone();
+                t.emit(BakeEvent::Farm { sky, index, farm: other.clone() })
+            }
         }
     }));
     farm
 }
 
-/// Renders one slice through the session; a texel that is not finite is an
-/// error naming it.
-fn render_one(session: &Session, view: &View, sky: &str, index: usize, cores: usize, cancel: Arc<AtomicBool>) -> Result<RenderedSlice, BakeError> {
+/// Renders a strip of slices (or one slice) through the session, with a
+/// journal in the cache folder: a bake killed mid-strip resumes from the
+/// columns it had (the journal goes once the strip is done). Returns the
+/// image, its cost in core-seconds and the columns taken from a journal.
+fn render_strip(session: &Session, strip: &View, cache: &SliceCache, sky: &str, indices: &[usize], cores: usize, cancel: Arc<AtomicBool>) -> Result<(Image, f64, u32), BakeError> {
+    let job = session.job(strip);
+    let path = cache.dir().join(format!("{}.journal", job.hash));
+    let header = Header { job_hash: job.hash.clone(), width: strip.width as u32, height: strip.height as u32 };
+    // A journal that cannot be read back (torn header, another job) is started again.
+    let (journal, resumed) = match path.exists().then(|| Journal::resume(&path, &header)) {
+        Some(Ok((j, columns))) => (j, columns),
+        _ => (Journal::create(&path, &header).map_err(BakeError::Journal)?, BTreeMap::new()),
+    };
+    let resumed_columns = resumed.len() as u32;
     let start = Instant::now();
-    let rendered = session.render_view(view, cancel).map_err(|source| BakeError::Render { sky: sky.to_string(), index, source })?;
-    let core_seconds = start.elapsed().as_secs_f64() * cores as f64;
-    let px = &rendered.image.pixels;
+    let error = |source| {
+        let (first, last) = (indices[0], *indices.last().expect("a strip has slices"));
+        if first == last {
+            BakeError::Render { sky: sky.to_string(), index: first, source }
+        } else {
+            BakeError::RenderSlices { sky: sky.to_string(), first, last, source }
+        }
+    };
+    let rendered = session.render(job, resumed, Some(journal), cancel).map_err(error)?;
+    let _ = std::fs::remove_file(&path);
+    Ok((rendered.image, start.elapsed().as_secs_f64() * cores as f64, resumed_columns))
+}
+
+/// Slice `index` of `sky`, the columns of `image` from `x0` on; a texel
+/// that is not finite is an error naming it.
+fn slice_of_strip(image: &Image, x0: usize, view: &View, sky: &str, index: usize, core_seconds: f64) -> Result<RenderedSlice, BakeError> {
+    let (w, h) = (view.width, view.height);
+    let px: Vec<&crate::render::PixelResult> = (0..h).flat_map(|y| &image.pixels[y * image.width + x0..y * image.width + x0 + w]).collect();
     for (i, p) in px.iter().enumerate() {
         for (what, v) in [("X", p.xyz[0]), ("Y", p.xyz[1]), ("Z", p.xyz[2])] {
             if !v.is_finite() {
-                return Err(BakeError::NotFinite { sky: sky.to_string(), index, u: i % view.width, v: i / view.width, what });
+                return Err(BakeError::NotFinite { sky: sky.to_string(), index, u: i % w, v: i / w, what });
             }
         }
     }
     Ok(RenderedSlice {
-        width: view.width,
-        height: view.height,
+        width: w,
+        height: h,
         sun_zenith_deg: view.sun_zenith_deg,
         xyz: px.iter().map(|p| p.xyz).collect(),
         xyz_stderr: px.iter().map(|p| p.xyz_stderr).collect(),
@@ -487,5 +606,53 @@ mod tests {
         // Not every texel at the floor or the cap: the plan has something to predict.
         assert!(total > 3 * 64 * 64 && total < 3 * 64 * 400, "{total}");
         assert!(pilot_view(&View { max_rel_error: None, ..slice_view(&sky, &sampling, 0, 6371.0, 100.0, 87.5) }).is_none());
+    }
+
+    /// A strip of slices (one farm job) renders each slice's texels bit for
+    /// bit as the slice rendered alone, also in a task that crosses from one
+    /// slice into the next, and with an adaptive sample count.
+    #[test]
+    fn a_strip_renders_each_slice_as_it_renders_alone() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
+        let sampling = Sampling { band_nm: 40.0, spp: 128, max_rel_error: Some(0.3) };
+        let scene = Scene::new(&atm, &spectral_settings(&sampling), &MieCache::new(None), &|| {});
+        let sky = BasisSky {
+            name: "t".into(),
+            atmosphere: root.join("tests/atmospheres/disort_rayleigh_hg.toml"),
+            width: 3,
+            height: 8,
+            slices: 64,
+            altitude_m: 0.0,
+            threshold_deg: 87.5,
+            line: 1,
+            draft: sampling.clone(),
+            final_: sampling.clone(),
+        };
+        let cancel = AtomicBool::new(false);
+        // Day, the sun-centred mapping's last slices, twilight.
+        let views: Vec<View> = [20, 47, 52, 60].iter().map(|&i| slice_view(&sky, &sampling, i, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg)).collect();
+        let strip = strip_view(&views.iter().collect::<Vec<_>>());
+        assert_eq!((strip.width, strip.height), (12, 8));
+        assert!(strip.check().is_ok());
+        assert!(View { width: 13, ..strip.clone() }.check().is_err());
+        let whole = render(&scene, &strip, &cancel, &|| {}).unwrap();
+        // Columns 2 to 7: the end of slice 0, all of slice 1, the start of slice 2.
+        let task = crate::render::render_columns(&scene, &strip, 2, 6, &cancel, &|| {}).unwrap();
+        for (k, v) in views.iter().enumerate() {
+            let alone = render(&scene, v, &cancel, &|| {}).unwrap();
+            for y in 0..8 {
+                for x in 0..3 {
+                    let (a, b) = (&alone.pixels[y * 3 + x], &whole.pixels[y * 12 + k * 3 + x]);
+                    assert!(a.xyz.iter().zip(&b.xyz).all(|(p, q)| p.to_bits() == q.to_bits()) && a.samples == b.samples, "slice {k}, texel ({x}, {y})");
+                    if let Some(col) = (k * 3 + x).checked_sub(2).and_then(|c| task.get(c)) {
+                        assert_eq!(col[y].xyz.map(f64::to_bits), a.xyz.map(f64::to_bits), "task column {}", k * 3 + x);
+                    }
+                }
+            }
+        }
+        // The texels took different sample counts (adaptive sampling), each as in its own slice.
+        let counts: std::collections::BTreeSet<u32> = whole.pixels.iter().map(|p| p.samples).collect();
+        assert!(counts.len() > 1, "{counts:?}");
     }
 }

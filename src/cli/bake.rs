@@ -243,7 +243,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
                 let cost: Vec<f64> = s.slices.iter().flatten().map(|x| x.core_seconds).collect();
                 serde_json::json!({
                     "name": e.name, "file": e.file, "bytes": e.bytes, "width": e.width, "height": e.height, "layers": e.layers,
-                    "slices_rendered": s.rendered, "slices_cached": s.cached,
+                    "slices_rendered": s.rendered, "slices_cached": s.cached, "columns_resumed": s.columns_resumed,
                     "core_seconds": cost.iter().sum::<f64>(), "core_seconds_per_slice": cost,
                     "texels_clamped": st.clamped_texels, "texels_denormal": st.denormal_texels, "texels_underflow": st.underflow_texels, "texels_negative_rgb": e.texels_negative_rgb,
                 })

@@ -383,6 +383,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             if mapping.sun_centred() { "sun-centred" } else { "latitude-longitude" },
             mapping.threshold_deg
         ),
+        Camera::LutStrip { mappings, .. } => format!("a strip of {} lut slices", mappings.len()),
     };
     let metadata = vec![
         ("version".to_string(), sky::VERSION.to_string()),

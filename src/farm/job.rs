@@ -127,9 +127,7 @@ pub fn open_optics(o: &proto::Optics, claimed_hash: &str) -> Result<(Atmosphere,
 /// Unpacks a task's view.
 pub fn open_view(view_json: &str) -> Result<View, JobError> {
     let view: View = serde_json::from_str(view_json).map_err(|e| JobError::View(e.to_string()))?;
-    if view.width == 0 || view.height == 0 || view.spp == 0 {
-        return Err(JobError::View(format!("empty image {}x{} at {} spp", view.width, view.height, view.spp)));
-    }
+    view.check().map_err(JobError::View)?;
     Ok(view)
 }
 

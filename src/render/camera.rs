@@ -27,6 +27,13 @@ pub enum Camera {
     /// ([`crate::lut::mapping`]), turned to the sun's azimuth. Texel centres
     /// are sampled without jitter, as a GPU's bilinear filter expects.
     Lut { mapping: crate::lut::mapping::DirectionMapping, sun_azimuth_deg: f64 },
+    /// LUT slices side by side, each `width / mappings.len()` columns of
+    /// the image and each with its own sun (the mapping's sun zenith angle;
+    /// the view's sun is not used): the slices of a basis sky as one farm
+    /// job, so that workers go from one slice to the next without waiting
+    /// for the last column of each (see [`super::View::parts`]). Column x
+    /// of slice k is rendered exactly as column x of that slice alone.
+    LutStrip { mappings: Vec<crate::lut::mapping::DirectionMapping>, sun_azimuth_deg: f64 },
 }
 
 impl Camera {
@@ -69,12 +76,17 @@ impl Camera {
                 let (s, c) = (libm::sin(sun_azimuth_deg.to_radians()), libm::cos(sun_azimuth_deg.to_radians()));
                 Some(DVec3::new(c * d.x - s * d.y, s * d.x + c * d.y, d.z))
             }
+            Camera::LutStrip { mappings, sun_azimuth_deg } => {
+                let w = width / mappings.len().max(1);
+                let k = (x as usize / w.max(1)).min(mappings.len().checked_sub(1)?);
+                Camera::Lut { mapping: mappings[k], sun_azimuth_deg: *sun_azimuth_deg }.direction(x - (k * w) as f64, y, w, height)
+            }
         }
     }
 
     /// Whether pixel positions are jittered within the pixel.
     pub fn jitters(&self) -> bool {
-        !matches!(self, Camera::Directions(_) | Camera::Lut { .. })
+        !matches!(self, Camera::Directions(_) | Camera::Lut { .. } | Camera::LutStrip { .. })
     }
 }
 

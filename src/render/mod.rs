@@ -124,6 +124,40 @@ impl View {
     pub fn single_by_quadrature(&self) -> bool {
         self.single_scatter == SingleScatter::Quadrature && self.estimator == Estimator::Full && !self.camera.jitters()
     }
+
+    /// The views this one renders as: itself, or for a strip of LUT slices
+    /// ([`Camera::LutStrip`]) each slice's own view (its width, its sun),
+    /// each with the image column where it starts.
+    pub fn parts(&self) -> Vec<(usize, View)> {
+        match &self.camera {
+            Camera::LutStrip { mappings, sun_azimuth_deg } => {
+                let w = self.width / mappings.len().max(1);
+                mappings
+                    .iter()
+                    .enumerate()
+                    .map(|(k, m)| {
+                        let camera = Camera::Lut { mapping: *m, sun_azimuth_deg: *sun_azimuth_deg };
+                        (k * w, View { camera, width: w, sun_zenith_deg: m.sun_zenith_deg, sun_azimuth_deg: *sun_azimuth_deg, ..self.clone() })
+                    })
+                    .collect()
+            }
+            _ => vec![(0, self.clone())],
+        }
+    }
+
+    /// Why a view cannot be rendered, if it cannot: an empty image, or a
+    /// strip whose width is not a whole number of equal slices.
+    pub fn check(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 || self.spp == 0 {
+            return Err(format!("empty image {}x{} at {} spp", self.width, self.height, self.spp));
+        }
+        if let Camera::LutStrip { mappings, .. } = &self.camera {
+            if mappings.is_empty() || !self.width.is_multiple_of(mappings.len()) {
+                return Err(format!("a strip of {} LUT slices cannot be {} columns wide", mappings.len(), self.width));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Everything that defines a render besides the atmosphere (serialised
@@ -309,13 +343,16 @@ impl<'a> PixelTracers<'a> {
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
 pub fn render_pixel(scene: &Scene, s: &View, pixel: usize) -> PixelResult {
-    render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, &AtomicBool::new(false))
+    render_pixel_cancellable(scene, s, pixel, &AtomicBool::new(false))
 }
 
 /// [`render_pixel`] that stops early (with a partial, discarded result)
 /// when `cancel` is set, so Ctrl-C does not wait for long pixels.
 pub fn render_pixel_cancellable(scene: &Scene, s: &View, pixel: usize, cancel: &AtomicBool) -> PixelResult {
-    render_pixel_with(&PixelTracers::new(scene, s), scene, s, pixel, cancel)
+    let (x, y) = (pixel % s.width, pixel / s.width);
+    let parts = s.parts();
+    let (first, part) = parts.iter().rev().find(|(first, _)| *first <= x).expect("a view's parts start at column 0");
+    render_pixel_with(&PixelTracers::new(scene, part), scene, part, y * part.width + x - first, cancel)
 }
 
 /// [`render_pixel_cancellable`] with the render's shared tracers.
@@ -486,15 +523,26 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
 pub fn render_columns(scene: &Scene, s: &View, first: usize, count: usize, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Option<Vec<Vec<PixelResult>>> {
     use rayon::prelude::*;
     let h = s.height;
-    let tracers = PixelTracers::new(scene, s);
+    // The parts of the view (one, or the slices of a strip) that the
+    // columns cross, with their tracers; one parallel loop over them all.
+    let parts: Vec<(usize, View, PixelTracers)> = s
+        .parts()
+        .into_iter()
+        .filter(|(start, v)| *start < first + count && start + v.width > first)
+        .map(|(start, v)| {
+            let t = PixelTracers::new(scene, &v);
+            (start, v, t)
+        })
+        .collect();
     let flat: Vec<Option<PixelResult>> = (0..count * h)
         .into_par_iter()
         .map(|i| {
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
-            let (c, row) = (i / h, i % h);
-            let r = render_pixel_with(&tracers, scene, s, row * s.width + first + c, cancel);
+            let (c, row) = (first + i / h, i % h);
+            let (start, v, tracers) = parts.iter().rev().find(|(start, _, _)| *start <= c).expect("the columns' parts");
+            let r = render_pixel_with(tracers, scene, v, row * v.width + c - start, cancel);
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
@@ -529,6 +577,11 @@ pub enum RenderError {
 /// each pixel (for progress); `cancel` stops the render.
 pub fn render(scene: &Scene, s: &View, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<Image, RenderError> {
     use rayon::prelude::*;
+    if s.parts().len() > 1 {
+        let columns = render_columns(scene, s, 0, s.width, cancel, on_pixel).ok_or(RenderError::Cancelled)?;
+        let pixels = (0..s.height).flat_map(|y| columns.iter().map(move |c| c[y].clone())).collect();
+        return Ok(Image { width: s.width, height: s.height, pixels });
+    }
     let n = s.width * s.height;
     let tracers = PixelTracers::new(scene, s);
     let pixels: Vec<Option<PixelResult>> = (0..n)
