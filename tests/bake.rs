@@ -85,9 +85,64 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     let o = sky(&["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "20", "--size", "32x32", "--out", exr.to_str().unwrap(), "--png", png.to_str().unwrap()], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(exr.exists() && png.exists());
+    for camera in ["equirect", "pinhole"] {
+        let out = tmp.path().join(format!("{camera}.exr"));
+        let o = sky(&["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "5", "--haziness", "0.7", "--camera", camera, "--size", "24x12", "--out", out.to_str().unwrap()], tmp.path());
+        assert!(o.status.success() && out.exists(), "{camera}: {}", String::from_utf8_lossy(&o.stderr));
+    }
     let o = sky(&["lut", "sample", m.to_str().unwrap(), "--sun-elevation-deg", "30", "--haziness", "0.5", "--direction", "50,120", "--json"], tmp.path());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!((v["xyz"][1].as_f64().unwrap() / y - 1.0).abs() < 1e-12);
+}
+
+/// A draft (fixed samples) forecasts its cost from probes before the first
+/// slice, so its ETA does not assume that every sky's texels cost the same.
+#[test]
+fn a_draft_forecasts_its_cost_from_probes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("luts");
+    let bake = root().join("tests/bakes/tiny.toml");
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json-progress"], tmp.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
+    assert_eq!(forecast["from"], "probes");
+    // 126 distinct slices of 4 x 16 texels at 2 samples.
+    assert_eq!(forecast["samples"], 126 * 64 * 2);
+    assert!(forecast["core_seconds"].as_f64().unwrap() > 0.0, "{forecast}");
+    // It comes before the first slice, and the progress after it has an ETA.
+    let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
+    assert!(at("forecast") < at("slice"));
+    assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
+}
+
+/// A texel that is not finite is a bake error naming the basis sky, the
+/// slice and the texel (here planted in a cached slice), reported in the
+/// `--json` summary too, and nothing is written.
+#[test]
+fn a_texel_that_is_not_finite_is_a_located_bake_error() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let first = tmp.path().join("first");
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", first.to_str().unwrap()], tmp.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let cache = sky::bake::SliceCache::open(&first.join("cache")).unwrap();
+    let file = std::fs::read_dir(first.join("cache")).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|x| x == "slice")).unwrap();
+    let key = file.file_stem().unwrap().to_str().unwrap().to_string();
+    let mut slice = cache.get(&key).unwrap();
+    // Texel (u 1, v 2) of a 4-wide slice.
+    slice.xyz[2 * 4 + 1][1] = f64::NAN;
+    cache.put(&key, &slice).unwrap();
+    let second = tmp.path().join("second");
+    let cache_dir = first.join("cache");
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", second.to_str().unwrap(), "--cache", cache_dir.to_str().unwrap(), "--json"], tmp.path());
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    let line = err.lines().find(|l| l.contains("is not finite")).unwrap_or_else(|| panic!("{err}"));
+    assert!(line.starts_with("sky bake-luts: basis sky ") && line.contains(", slice ") && line.ends_with("texel (u 1, v 2): RGB is not finite"), "{line}");
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["errors"][0].as_str().unwrap(), line.trim_start_matches("sky bake-luts: "));
+    assert!(!second.join("manifest.json").exists() && !second.join("clear.ktx2").exists() && !second.join("hazed.ktx2").exists());
 }
 
 #[test]

@@ -28,10 +28,12 @@ pub enum BakeEvent {
     Planned { skies: usize, slices_total: usize, slices_cached: usize, texels_to_render: u64 },
     /// A basis sky's optics are being prepared.
     Preparing { sky: String },
-    /// With adaptive sampling: what the slices' pilots (rendered first, 32
-    /// samples a texel) say the bake will take: every texel's sample count
-    /// exactly, and core-seconds at the pilots' pace.
-    Forecast { core_seconds: f64, samples: u64, planning_core_seconds: f64 },
+    /// What the bake will take, before its first slice: with adaptive
+    /// sampling from the slices' pilots (rendered first, 32 samples a
+    /// texel: every texel's sample count exactly, and core-seconds at the
+    /// pilots' pace); with a fixed sample count from probes (a few slices
+    /// at a sixteenth of their texels, timed). `from`: "pilots" or "probes".
+    Forecast { from: &'static str, core_seconds: f64, samples: u64, planning_core_seconds: f64 },
     /// One slice is done (rendered now, or found in the cache).
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
     /// Every slice of a basis sky is done.

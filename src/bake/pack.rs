@@ -38,10 +38,14 @@ pub fn slice_scale_log2(max_value: f64) -> i32 {
     k.clamp(-60, 60)
 }
 
-/// What packing one basis sky produced.
+/// What packing one basis sky produced, in memory.
 pub struct PackedSky {
     pub entry: SkyEntry,
     pub stats: PackStats,
+    /// The array's words, layer after layer.
+    words: Vec<u32>,
+    /// The file's own manifest entry (its `sky` key).
+    sky_json: String,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -52,8 +56,9 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Packs one basis sky (every slice present) into `dir/NAME.ktx2`.
-pub fn pack_sky(s: &SkySlices, colour: ColourSpace, dir: &Path) -> Result<PackedSky, BakeError> {
+/// Packs one basis sky (every slice present) in memory; a texel that is
+/// not finite is an error naming it.
+pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeError> {
     let (w, h) = (s.sky.width, s.sky.height);
     let mut words = Vec::with_capacity(w * h * s.slices.len());
     let mut stats = PackStats::default();
@@ -74,9 +79,9 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace, dir: &Path) -> Result<Packed
         slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel) });
     }
     let file = format!("{}.ktx2", s.sky.name);
-    let mut entry = SkyEntry {
+    let entry = SkyEntry {
         name: s.sky.name.clone(),
-        file: file.clone(),
+        file,
         format: "B10G11R11_UFLOAT_PACK32".into(),
         vk_format: VK_FORMAT_B10G11R11_UFLOAT_PACK32,
         bytes: 0,
@@ -101,9 +106,18 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace, dir: &Path) -> Result<Packed
     let mut inner = serde_json::to_value(&entry).expect("an entry always serialises");
     inner.as_object_mut().expect("an object").remove("bytes");
     let sky_json = inner.to_string();
-    let tex = ArrayTexture { width: w as u32, height: h as u32, layers: s.slices.len() as u32, colour_space: colour, texels: Texels::B10G11R11(&words), sky_json: &sky_json };
-    entry.bytes = ktx2::write(&dir.join(&file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
-    Ok(PackedSky { entry, stats })
+    Ok(PackedSky { entry, stats, words, sky_json })
+}
+
+impl PackedSky {
+    /// Writes `dir/NAME.ktx2` (through a temporary file and a rename) and
+    /// records its size in the entry.
+    pub fn write(&mut self, colour: ColourSpace, dir: &Path) -> Result<(), BakeError> {
+        let e = &self.entry;
+        let tex = ArrayTexture { width: e.width as u32, height: e.height as u32, layers: e.layers as u32, colour_space: colour, texels: Texels::B10G11R11(&self.words), sky_json: &self.sky_json };
+        self.entry.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+        Ok(())
+    }
 }
 
 /// The manifest of packed skies.
@@ -133,11 +147,16 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
 /// Packs every basis sky into `dir` and writes `dir/manifest.json` last
 /// (each file through a temporary file and a rename).
 pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: &Path) -> Result<(Manifest, Vec<PackStats>), BakeError> {
+    // Every sky packed before any file is written: a texel that is not
+    // finite leaves no file behind.
+    let mut packed = skies.iter().map(|s| pack_sky(s, colour)).collect::<Result<Vec<_>, _>>()?;
     std::fs::create_dir_all(dir).map_err(|e| BakeError::Write(format!("{}: {e}", dir.display())))?;
     let mut entries = Vec::new();
     let mut stats = Vec::new();
-    for s in skies {
-        let p = pack_sky(s, colour, dir)?;
+    for p in &mut packed {
+        p.write(colour, dir)?;
+    }
+    for p in packed {
         entries.push(p.entry);
         stats.push(p.stats);
     }

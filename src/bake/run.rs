@@ -242,6 +242,28 @@ impl StripJob {
     }
 }
 
+/// The slices a draft's forecast times: day, low sun, sunset, the horizon,
+/// twilight.
+const PROBE_SLICES: [usize; 5] = [8, 24, 40, 48, 58];
+/// A probe renders every `PROBE_STRIDE`-th texel of its slice in both axes.
+const PROBE_STRIDE: usize = 4;
+/// Fewer slices to render (a farm manager's task renders one) are not worth
+/// probing: the ETA is then the texel rate.
+const MIN_SLICES_TO_PROBE: usize = 16;
+
+/// The value at `x` of the piecewise-linear function through `points`
+/// (sorted by x), constant beyond the first and the last.
+fn interpolate(points: &[(usize, f64)], x: usize) -> f64 {
+    match points.iter().position(|&(px, _)| px >= x) {
+        None => points.last().map_or(0.0, |p| p.1),
+        Some(0) => points[0].1,
+        Some(i) => {
+            let ((x0, y0), (x1, y1)) = (points[i - 1], points[i]);
+            y0 + (y1 - y0) * (x - x0) as f64 / (x1 - x0) as f64
+        }
+    }
+}
+
 /// The strip of `views` (LUT slices of one basis sky, same size and
 /// sampling) side by side: one farm job (see [`Camera::LutStrip`]). A
 /// single view is its own strip.
@@ -408,7 +430,54 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         t.prep_s += start.elapsed().as_secs_f64();
         t.planning = false;
         t.forecast_total = Some(total);
-        t.emit(BakeEvent::Forecast { core_seconds: total, samples, planning_core_seconds });
+        t.emit(BakeEvent::Forecast { from: "pilots", core_seconds: total, samples, planning_core_seconds });
+    } else if plan.iter().map(|p| p.views.iter().flatten().count()).sum::<usize>() >= MIN_SLICES_TO_PROBE {
+        // A fixed sample count (a draft): every texel takes the same
+        // samples, but a texel's cost differs from sky to sky (a cloudy
+        // texel costs 6 times a clear one) and with the sun (twilight paths
+        // are longer). Probes of a few slices at a sixteenth of their texels
+        // time it; the other slices' cost per texel is interpolated in the
+        // slice index.
+        let start = Instant::now();
+        tracker.lock().unwrap().planning = true;
+        let (mut total, mut samples) = (0.0, 0u64);
+        for (k, p) in plan.iter().enumerate() {
+            let Some(session) = &sessions[k] else { continue };
+            let sky = &p.out.sky;
+            let mut per_texel: Vec<(usize, f64)> = Vec::new();
+            for (n, &index) in PROBE_SLICES.iter().filter(|&&i| i < sky.slices).enumerate() {
+                if cancel.load(Ordering::SeqCst) {
+                    return Err(BakeError::Cancelled);
+                }
+                tracker.lock().unwrap().current = (sky.name.clone(), index);
+                let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
+                let probe = View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full };
+                let render = |v: &View| session.render_view(v, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index, source });
+                if n == 0 {
+                    // Untimed: connects the workers and sends them the optics.
+                    render(&View { width: 1, height: 1, ..probe.clone() })?;
+                }
+                let t = Instant::now();
+                render(&probe)?;
+                per_texel.push((index, t.elapsed().as_secs_f64() * opts.cores as f64 / (probe.width * probe.height) as f64));
+            }
+            for (index, v) in p.views.iter().enumerate() {
+                let Some((view, _)) = v else { continue };
+                if p.same_as[index].is_some() {
+                    continue;
+                }
+                let texels = (view.width * view.height) as f64;
+                forecasts[k][index] = texels * interpolate(&per_texel, index);
+                total += forecasts[k][index];
+                samples += texels as u64 * view.spp as u64;
+            }
+        }
+        let planning_core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
+        let mut t = tracker.lock().unwrap();
+        t.prep_s += start.elapsed().as_secs_f64();
+        t.planning = false;
+        t.forecast_total = Some(total);
+        t.emit(BakeEvent::Forecast { from: "probes", core_seconds: total, samples, planning_core_seconds });
     }
     let mut done = Vec::new();
     for (k, (Planned { mut out, views, same_as, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {

@@ -104,8 +104,8 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                     eprintln!("sky bake-luts: {sky}: preparing the optics");
                 }
             }
-            BakeEvent::Forecast { core_seconds, samples, planning_core_seconds } => {
-                say(format!("sky bake-luts: the pilots forecast {samples} samples, {:.2} core-hours ({:.2} core-hours spent on them)", core_seconds / 3600.0, planning_core_seconds / 3600.0));
+            BakeEvent::Forecast { from, core_seconds, samples, planning_core_seconds } => {
+                say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them)", core_seconds / 3600.0, planning_core_seconds / 3600.0));
             }
             BakeEvent::Slice { .. } => {}
             BakeEvent::SkyDone { sky, slices_rendered, slices_cached, core_seconds } => {
@@ -196,12 +196,17 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if let Some(b) = bar.lock().unwrap().take() {
         b.finish_and_clear();
     }
+    // A failed bake: the error on stderr and, with --json, in the summary.
+    let failed = |e: &dyn std::fmt::Display| {
+        eprintln!("sky bake-luts: {e}");
+        if a.json {
+            outln!("{}", serde_json::json!({ "manifest": null, "quality": quality.name(), "errors": [e.to_string()] }));
+        }
+        Ok(ExitCode::from(EXIT_INVALID))
+    };
     let skies = match result {
         Ok(s) => s,
-        Err(e) => {
-            eprintln!("sky bake-luts: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
+        Err(e) => return failed(&e),
     };
     let rendered: usize = skies.iter().map(|s| s.rendered).sum();
     let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum();
@@ -220,10 +225,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     }
     let (manifest, stats) = match bake::pack::write_bake(&skies, quality.name(), a.colour_space, &a.out) {
         Ok(m) => m,
-        Err(e) => {
-            eprintln!("sky bake-luts: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
+        Err(e) => return failed(&e),
     };
     let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
     for (e, st) in manifest.skies.iter().zip(&stats) {
