@@ -29,3 +29,9 @@ pub mod table;
 
 /// Version of this build, recorded in outputs.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The renderer's source: a hash of every file a rendered pixel depends on
+/// (see build.rs). Cached slices, prepared optics and farm workers are
+/// matched on it as well as on [`VERSION`], so a change to the physics
+/// under the same version is never mixed with results of the old one.
+pub const RENDER_SOURCE: &str = env!("SKY_RENDER_SOURCE");

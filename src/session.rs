@@ -27,7 +27,7 @@ use std::sync::{Arc, Mutex};
 /// the atmosphere's content hash (the file and every data file it reads)
 /// and the spectral settings.
 pub fn optics_hash(atm: &Atmosphere, spectral: &SpectralSettings) -> String {
-    let key = serde_json::json!({ "atmosphere": atm.content_hash, "spectral": spectral, "build": crate::VERSION });
+    let key = serde_json::json!({ "atmosphere": atm.content_hash, "spectral": spectral, "build": crate::VERSION, "render_source": crate::RENDER_SOURCE });
     blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
 }
 

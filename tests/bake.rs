@@ -206,6 +206,40 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     }
 }
 
+/// Ctrl-C (SIGINT) stops a bake with exit code 130 and packs nothing; the
+/// same command then resumes from the strip's journal.
+#[test]
+fn ctrl_c_stops_a_bake_that_then_resumes() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let out = tmp.path().join("stopped");
+    let cache = out.join("cache");
+    let child = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .env("SKY_CACHE_DIR", "off")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let journaled =
+        || std::fs::read_dir(&cache).map(|r| r.flatten().any(|e| e.path().extension().is_some_and(|x| x == "journal") && e.metadata().map(|m| m.len() > 400).unwrap_or(false))).unwrap_or(false);
+    let mut waited = 0;
+    while !journaled() && waited < 6000 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        waited += 1;
+    }
+    assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("cancelled; nothing was packed") && err.contains("the same command resumes"), "{err}");
+    assert!(!out.join("manifest.json").exists());
+    let resumed = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let columns_resumed: u64 = resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
+    assert!(columns_resumed > 0, "{resumed}");
+    assert!(out.join("manifest.json").exists());
+}
+
 #[test]
 fn a_slice_goes_only_into_the_cache() {
     let tmp = tempfile::tempdir().unwrap();

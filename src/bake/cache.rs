@@ -37,6 +37,7 @@ pub fn slice_key(atmosphere_hash: &str, spectral: &SpectralSettings, view: &View
         "view": view,
         "quality": quality,
         "build": crate::VERSION,
+        "render_source": crate::RENDER_SOURCE,
         "format": FORMAT,
     });
     blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
@@ -97,6 +98,13 @@ mod tests {
 
     fn slice() -> RenderedSlice {
         RenderedSlice { width: 2, height: 1, sun_zenith_deg: 30.0, xyz: vec![[1.0, 2.0, 3.0], [0.1, 0.2, 0.3]], xyz_stderr: vec![[0.0; 3]; 2], samples: vec![8, 8], core_seconds: 0.5 }
+    }
+
+    /// The key names the renderer's source (build.rs), not only the version.
+    #[test]
+    fn the_key_names_the_renderers_source() {
+        assert!(crate::RENDER_SOURCE.len() == 32 && crate::RENDER_SOURCE.bytes().all(|b| b.is_ascii_hexdigit()), "{}", crate::RENDER_SOURCE);
+        assert!(crate::farm::build_version().contains(&crate::RENDER_SOURCE[..12]));
     }
 
     #[test]

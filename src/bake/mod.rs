@@ -109,3 +109,11 @@ pub enum BakeError {
     #[error("bake cancelled")]
     Cancelled,
 }
+
+impl BakeError {
+    /// Whether the bake was stopped (Ctrl-C) rather than failed.
+    pub fn is_cancelled(&self) -> bool {
+        use crate::farm::coordinator::FarmError;
+        matches!(self, BakeError::Cancelled | BakeError::Render { source: FarmError::Cancelled, .. } | BakeError::RenderSlices { source: FarmError::Cancelled, .. })
+    }
+}

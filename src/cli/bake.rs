@@ -206,6 +206,13 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     };
     let skies = match result {
         Ok(s) => s,
+        Err(e) if e.is_cancelled() => {
+            eprintln!(
+                "sky bake-luts: cancelled; nothing was packed. The finished slices are in the cache {} and the columns of the basis sky being rendered in its journal there: the same command resumes",
+                opts.cache.dir().display()
+            );
+            return Ok(ExitCode::from(130));
+        }
         Err(e) => return failed(&e),
     };
     let rendered: usize = skies.iter().map(|s| s.rendered).sum();

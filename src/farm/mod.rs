@@ -44,7 +44,7 @@ pub const PROTOCOL_VERSION: u32 = 2;
 
 /// The build a job needs: only the same build renders bit-identically.
 pub fn build_version() -> String {
-    crate::VERSION.to_string()
+    format!("{}+render.{}", crate::VERSION, &crate::RENDER_SOURCE[..12])
 }
 
 /// The largest message a worker or coordinator accepts, bytes (optics with

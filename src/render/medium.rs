@@ -643,6 +643,23 @@ mod tests {
         assert!(postcard::to_allocvec(&ColumnTable::cached(&m, Some(dir.path()))).unwrap() == fresh);
     }
 
+    /// A ray from a point just above the top of a spherical atmosphere (a
+    /// path's vertex can end up there by rounding) never re-enters it: its
+    /// walk has no segment, where it had one of infinite length, along
+    /// which delta and ratio tracking drew null collisions forever (a
+    /// `sky lut verify` of the hazed sky with the sun on the horizon hung).
+    #[test]
+    fn a_ray_from_above_the_top_has_no_endless_segment() {
+        use glam::DVec3;
+        let atm = crate::atmosphere::Atmosphere::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/analytic-hg.toml")).unwrap();
+        let m = Medium::new(&atm);
+        for (above_km, d) in [(1e-9, DVec3::X), (1e-7, DVec3::new(0.3, 0.0, 1.0).normalize()), (0.0, DVec3::Y), (-1e-9, DVec3::X)] {
+            let p = DVec3::new(0.0, 0.0, m.radius_km + m.top_km + above_km);
+            let segs: Vec<_> = m.walk(p, d).collect();
+            assert!(segs.iter().all(|s| s.end_km.is_finite()), "{above_km} km above the top along {d}: {segs:?}");
+        }
+    }
+
     /// A cloud layer with sharp edges (the shipped cloudy skies' tables:
     /// density 1 from 3 to 5 km, which the raster ramps to 0 over the 10 m
     /// outside each edge) gets shell edges at its base and top, so no shell

@@ -67,7 +67,16 @@ impl Iterator for ShellWalk<'_> {
         }
         self.left -= 1;
         let (shell, t_exit, next) = self.medium.shell_exit(self.p, self.dir);
-        let next = if t_exit.is_finite() { next } else { Boundary::Space };
+        if !t_exit.is_finite() {
+            // A ray that never leaves its shell: from a point above the top
+            // (rounding puts a vertex there), where the medium is empty and
+            // the ray never comes back, or parallel to a plane-parallel
+            // atmosphere's layers (a set of measure zero). It crosses
+            // nothing: an endless segment had tracking draw null
+            // collisions forever.
+            self.done = true;
+            return None;
+        }
         let start_km = self.t_km;
         match next {
             Boundary::Shell(_) if self.left > 0 => {
