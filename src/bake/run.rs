@@ -444,7 +444,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             let sky = &p.out.sky;
-            let mut per_texel: Vec<(usize, f64)> = Vec::new();
+            let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
             for (n, &index) in PROBE_SLICES.iter().filter(|&&i| i < sky.slices).enumerate() {
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
@@ -457,9 +457,20 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     // Untimed: connects the workers and sends them the optics.
                     render(&View { width: 1, height: 1, ..probe.clone() })?;
                 }
-                let t = Instant::now();
-                render(&probe)?;
-                per_texel.push((index, t.elapsed().as_secs_f64() * opts.cores as f64 / (probe.width * probe.height) as f64));
+                // A render's cost is a part per render (the farm job, the
+                // tracers and guides of its sun), which a probe's few texels
+                // would overstate per texel, and a part per texel: a
+                // one-texel render of the same view tells them apart.
+                let timed = |v: &View| -> Result<f64, BakeError> {
+                    let t = Instant::now();
+                    render(v)?;
+                    Ok(t.elapsed().as_secs_f64() * opts.cores as f64)
+                };
+                let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
+                let texels = (probe.width * probe.height) as f64;
+                let whole = timed(&probe)?;
+                per_slice_fixed.push((index, fixed));
+                per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
             }
             for (index, v) in p.views.iter().enumerate() {
                 let Some((view, _)) = v else { continue };
@@ -467,7 +478,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     continue;
                 }
                 let texels = (view.width * view.height) as f64;
-                forecasts[k][index] = texels * interpolate(&per_texel, index);
+                forecasts[k][index] = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
                 total += forecasts[k][index];
                 samples += texels as u64 * view.spp as u64;
             }

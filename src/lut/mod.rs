@@ -17,4 +17,5 @@ pub mod minifloat;
 pub mod r11g11b10;
 pub mod rgba16f;
 pub mod texels;
+pub mod transmittance;
 pub mod weather;
