@@ -70,12 +70,12 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     let d = sky::render::camera::direction_deg(50.0, 120.0);
     let y = luts.sample_xyz(30.0, 0.0, 0.5, 0.0, d)[1];
     assert!(y > 0.0 && y.is_finite(), "{y}");
-    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
 
     // Nothing changed: nothing is rendered, and the files are the same bytes.
     let second = summary(&sky(&args, tmp.path()));
     assert_eq!(rendered(&second), [("clear".to_string(), 0, 64), ("hazed".to_string(), 0, 64)]);
-    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
     assert!(before == after, "a re-run from the cache changed the files");
 
     // The decoder on the command line.
@@ -145,6 +145,63 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     assert!(!second.join("manifest.json").exists() && !second.join("clear.ktx2").exists() && !second.join("hazed.ktx2").exists());
 }
 
+/// A bake carries the sun that its sky textures leave out: a transmittance
+/// file (RGBA16F, a layer per basis sky, read back with the `ktx2` crate by
+/// the decoder) and per-slice sunlight in the manifest. The decoded sun
+/// matches the table computed directly from the same optics (to the
+/// halves' rounding), and the manifest's sunlight matches the renderer's
+/// own direct sun: the disk's radiance seen through the atmosphere times
+/// its solid angle.
+#[test]
+fn a_bake_carries_the_suns_transmittance_and_sunlight() {
+    use sky::render::{render, Scene, View};
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = tmp.path().join("sun.toml");
+    let atm_path = root().join("atmospheres/clear.toml");
+    std::fs::write(&bake, format!("[quality.draft]\nband_nm = 20.0\nspp = 1\n\n[[sky]]\nname = \"clear\"\natmosphere = {:?}\nwidth = 4\nheight = 16\n", atm_path.to_str().unwrap())).unwrap();
+    let out = tmp.path().join("luts");
+    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
+    let t = luts.manifest.transmittance.as_ref().expect("a transmittance entry");
+    assert_eq!((t.vk_format, t.width, t.height, t.layers.clone()), (97, 256, 64, vec!["clear".to_string()]));
+    assert_eq!(luts.transmittance.len(), 1);
+    let e = &luts.manifest.skies[0];
+    let sun = e.sun.as_ref().expect("a sun entry");
+    assert_eq!(sun.irradiance_xyz.len(), 64);
+
+    // The decoded sun against the table computed here from the same optics.
+    let atm = sky::atmosphere::Atmosphere::load(&atm_path).unwrap();
+    let spectral = sky::bake::run::spectral_settings(&sky::bake::Sampling { band_nm: 20.0, spp: 1, max_rel_error: None });
+    let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
+    let table = sky::lut::transmittance::TransmittanceTable::compute(&scene);
+    let m = sky::lut::colour::ColourSpace::Rec709.xyz_to_rgb();
+    let to_rgb = |x: [f64; 3]| sky::lut::decode::mat_mul(&m, x);
+    for elevation in [60.0f64, 20.0, 5.0, 1.0] {
+        let mu = elevation.to_radians().sin();
+        // Channels outside the gamut (blue, within a degree or two of the horizon) are stored as 0.
+        let want = to_rgb(table.sample_xyz(0.0, mu)).map(|x| x.max(0.0));
+        let got = luts.sun(elevation, 0.0, 0.0).unwrap().irradiance_rgb;
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() <= 2e-3 * want[1], "sun at {elevation} deg, channel {c}: decoded {got:?}, computed {want:?}");
+        }
+    }
+    assert_eq!(luts.sun(-1.0, 0.0, 0.0).unwrap().irradiance_rgb, [0.0; 3]);
+
+    // The manifest's sunlight against the renderer's direct sun, at three
+    // slices: the disk's radiance through the atmosphere times its solid angle.
+    for index in [10, 30, 45] {
+        let zenith = e.slices[index].sun_zenith_deg;
+        // 1024 samples: the renderer draws 4 of the 20 bands a sample, and
+        // near the horizon the transmittance differs fivefold across them.
+        let mut s = sky::render::Settings::directions(vec![(zenith, 0.0)], zenith, Vec::new(), 1024, 1, true);
+        s.view = View { sun_disk: true, ..s.view };
+        let r = render(&scene, &s.view, &std::sync::atomic::AtomicBool::new(false), &|| {}).unwrap();
+        let direct = r.pixels[0].xyz_direct.map(|x| x * sun.solid_angle_sr);
+        let want = sun.irradiance_xyz[index];
+        assert!((direct[1] / want[1] - 1.0).abs() < 0.01, "slice {index} (sun zenith {zenith:.2}): rendered {direct:?}, manifest {want:?}");
+    }
+}
+
 #[test]
 fn changing_one_atmosphere_rerenders_only_its_slices() {
     let tmp = tempfile::tempdir().unwrap();
@@ -201,7 +258,7 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     // The same bytes as a bake that was never interrupted.
     let fresh = tmp.path().join("fresh");
     summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"], tmp.path()));
-    for f in ["clear.ktx2", "hazed.ktx2"] {
+    for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2"] {
         assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(), "{f} differs after a resumed bake");
     }
 }

@@ -90,7 +90,28 @@ impl SliceCache {
         bytes.extend(postcard::to_allocvec(slice).expect("a slice always encodes"));
         crate::mie::cache::write_atomic(&path, &bytes).map_err(|source| CacheError { path, source })
     }
+
+    fn lighting_path(&self, key: &str) -> PathBuf {
+        self.dir.join(format!("{key}.lighting"))
+    }
+
+    /// A basis sky's lighting (see [`super::lighting`]), if the cache holds
+    /// a readable one.
+    pub fn get_lighting(&self, key: &str) -> Option<super::lighting::SkyLighting> {
+        let bytes = std::fs::read(self.lighting_path(key)).ok()?;
+        postcard::from_bytes(bytes.strip_prefix(LIGHTING_MAGIC.as_slice())?).ok()
+    }
+
+    /// Stores a basis sky's lighting under `key` (temporary file, rename).
+    pub fn put_lighting(&self, key: &str, lighting: &super::lighting::SkyLighting) -> Result<(), CacheError> {
+        let path = self.lighting_path(key);
+        let mut bytes = LIGHTING_MAGIC.to_vec();
+        bytes.extend(postcard::to_allocvec(lighting).expect("lighting always encodes"));
+        crate::mie::cache::write_atomic(&path, &bytes).map_err(|source| CacheError { path, source })
+    }
 }
+
+const LIGHTING_MAGIC: &[u8; 8] = b"SKYLGT01";
 
 #[cfg(test)]
 mod tests {

@@ -7,6 +7,7 @@
 pub mod bench;
 pub mod cache;
 pub mod file;
+pub mod lighting;
 pub mod openjd;
 pub mod pack;
 pub mod run;

@@ -16,14 +16,17 @@
 //! paths), so a bake from the cache, a resumed bake and a fresh one write
 //! the same bytes.
 
+use super::lighting::SkyLighting;
 use super::run::SkySlices;
 use super::BakeError;
 use crate::lut::colour::ColourSpace;
+use crate::lut::decode::mat_mul;
 use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
-use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry};
+use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry, SunEntry, TransmittanceEntry};
 use crate::lut::mapping;
 use crate::lut::r11g11b10::{self, PackStats};
 use crate::lut::texels::Texels;
+use crate::lut::{rgba16f, transmittance};
 use std::path::Path;
 
 /// The largest channel of a slice is scaled into (2^(TOP - 1), 2^TOP].
@@ -100,6 +103,7 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         texels_clamped: stats.clamped_texels,
         texels_denormal: stats.denormal_texels,
         texels_negative_rgb: negative,
+        sun: s.lighting.as_ref().map(|l| sun_entry(l, colour)),
     };
     // The file carries its own manifest entry (less its size, which the
     // file cannot know), under the `sky` key.
@@ -118,6 +122,59 @@ impl PackedSky {
         self.entry.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
         Ok(())
     }
+}
+
+/// The sun of a basis sky's lighting, in the manifest's colour space (its
+/// transmittance layer is set once the layers are known).
+fn sun_entry(l: &SkyLighting, colour: ColourSpace) -> SunEntry {
+    let m = colour.xyz_to_rgb();
+    SunEntry {
+        angular_diameter_deg: l.sun_angular_diameter_deg,
+        solid_angle_sr: l.sun_solid_angle_sr(),
+        top_irradiance_xyz: l.transmittance.top_xyz,
+        top_irradiance_rgb: mat_mul(&m, l.transmittance.top_xyz),
+        transmittance_layer: 0,
+        irradiance_xyz: l.irradiance_xyz.clone(),
+        irradiance_rgb: l.irradiance_xyz.iter().map(|x| mat_mul(&m, *x)).collect(),
+    }
+}
+
+/// The transmittance file of the skies' lighting: one RGBA16F layer per
+/// basis sky, in `dir`; records each sky's layer in its entry.
+fn write_transmittance(skies: &[SkySlices], entries: &mut [SkyEntry], colour: ColourSpace, dir: &Path) -> Result<Option<TransmittanceEntry>, BakeError> {
+    let Some(lightings) = skies.iter().map(|s| s.lighting.as_ref()).collect::<Option<Vec<_>>>() else { return Ok(None) };
+    let Some(first) = lightings.first() else { return Ok(None) };
+    if let Some(k) = lightings.iter().position(|l| l.transmittance.mapping != first.transmittance.mapping) {
+        return Err(BakeError::Write(format!("the transmittance file is one mapping for all basis skies, but {}'s planet radius or top differ from {}'s", skies[k].sky.name, skies[0].sky.name)));
+    }
+    let m = colour.xyz_to_rgb();
+    let mut halves = Vec::with_capacity(transmittance::WIDTH * transmittance::HEIGHT * lightings.len());
+    for (k, l) in lightings.iter().enumerate() {
+        let (packed, _) = rgba16f::pack_array(&l.transmittance.channel_texels(&m)).map_err(|e| BakeError::Write(format!("{}: transmittance texel {}: {}", skies[k].sky.name, e.texel, e.source)))?;
+        halves.extend(packed);
+        if let Some(sun) = &mut entries[k].sun {
+            sun.transmittance_layer = k;
+        }
+    }
+    let t = &first.transmittance.mapping;
+    let mut entry = TransmittanceEntry {
+        file: "transmittance.ktx2".into(),
+        format: "R16G16B16A16_SFLOAT".into(),
+        vk_format: ktx2::VK_FORMAT_R16G16B16A16_SFLOAT,
+        bytes: 0,
+        width: transmittance::WIDTH,
+        height: transmittance::HEIGHT,
+        layers: skies.iter().map(|s| s.sky.name.clone()).collect(),
+        mapping: format!(
+            "Bruneton 2017 (GetTransmittanceTextureUvFromRMu): R = {} km, R_top = {} km, H = sqrt(R_top^2 - R^2), rho = sqrt(r^2 - R^2), d = distance to R_top along mu; x_r = rho / H, x_mu = (d - d_min) / (d_max - d_min), d_min = R_top - r, d_max = rho + H; texel i of n holds x = i / (n - 1) (u = 0.5 / n + x (1 - 1 / n)); below mu = -rho / r the ray meets the ground: 0",
+            t.bottom_radius_km, t.top_radius_km
+        ),
+        channels: "RGB: the transmittance of the sun's own spectrum to the top of the atmosphere per channel of the manifest's colour space (irradiance = sun.top_irradiance_rgb * T); a channel the sun's colour leaves the space's gamut in (blue, with the sun within a degree or two of the horizon, in Rec.709) is 0; A = 1".into(),
+    };
+    let json = serde_json::to_string(&entry).expect("an entry always serialises");
+    let tex = ArrayTexture { width: entry.width as u32, height: entry.height as u32, layers: lightings.len() as u32, colour_space: colour, texels: Texels::Rgba16f(&halves), sky_json: &json };
+    entry.bytes = ktx2::write(&dir.join(&entry.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+    Ok(Some(entry))
 }
 
 /// The manifest of packed skies.
@@ -141,6 +198,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         direction_mapping: manifest::direction_mapping(),
         weather: manifest::weather(),
         skies,
+        transmittance: None,
     }
 }
 
@@ -160,7 +218,9 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
         entries.push(p.entry);
         stats.push(p.stats);
     }
-    let m = manifest(quality, colour, entries);
+    let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
+    let mut m = manifest(quality, colour, entries);
+    m.transmittance = transmittance;
     let text = serde_json::to_string_pretty(&m).expect("a manifest always serialises");
     let path = dir.join("manifest.json");
     crate::lut::atomic::write_atomically(&path, text.as_bytes()).map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;

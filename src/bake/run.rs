@@ -14,6 +14,7 @@
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BakeFile, BasisSky, Quality, Sampling};
+use super::lighting::{lighting_key, SkyLighting};
 use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
 use crate::atmosphere::Atmosphere;
 use crate::farm::coordinator::{Options, WorkerSpec};
@@ -93,6 +94,9 @@ pub struct SkySlices {
     pub sampling: Sampling,
     /// By slice index; None where `only` left a slice out.
     pub slices: Vec<Option<RenderedSlice>>,
+    /// The sun's transmittance and sunlight (None with `only`: a part of a
+    /// bake packs nothing).
+    pub lighting: Option<SkyLighting>,
     pub rendered: usize,
     pub cached: usize,
     /// Columns of this sky's strip taken from the journal of a bake that
@@ -342,6 +346,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             rendered: 0,
             cached,
             columns_resumed: 0,
+            lighting: None,
         };
         plan.push(Planned { atm, bundle, out, views, same_as });
     }
@@ -491,6 +496,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         t.emit(BakeEvent::Forecast { from: "probes", core_seconds: total, samples, planning_core_seconds });
     }
     let mut done = Vec::new();
+    let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
     for (k, (Planned { mut out, views, same_as, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
@@ -564,6 +570,21 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 out.slices[index] = slice;
                 out.cached += 1;
             }
+        }
+        if opts.only.is_none() {
+            // The sun's transmittance and sunlight, from the cache or from
+            // the sky's optics (prepared now if no slice needed them).
+            let zeniths: Vec<f64> = (0..out.sky.slices).map(|i| mapping::slice_sun_zenith_deg(i, out.radius_km, out.top_km)).collect();
+            let key = lighting_key(&out.atmosphere_hash, &out.spectral, out.sky.altitude_m, &zeniths);
+            out.lighting = match opts.cache.get_lighting(&key) {
+                Some(l) => Some(l),
+                None => {
+                    let scene = optics.get(&atms[k], &out.spectral, mie, &|| {});
+                    let l = SkyLighting::compute(&scene, out.sky.altitude_m, &zeniths);
+                    opts.cache.put_lighting(&key, &l)?;
+                    Some(l)
+                }
+            };
         }
         if out.slices.iter().any(Option::is_some) {
             tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });

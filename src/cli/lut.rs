@@ -168,11 +168,18 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             let rgb = luts.sample(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
             let xyz = luts.sample_xyz(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
             let space = &luts.manifest.colour.space;
+            // The sun the sky texture leaves out (bakes with a transmittance file).
+            let sun = luts.sun(c.sun_elevation_deg, c.haziness, c.cloudiness);
             if a.json {
-                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)" }));
+                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun }));
             } else {
                 outln!("XYZ {:.6e} {:.6e} {:.6e}  (Y in cd/m^2)", xyz[0], xyz[1], xyz[2]);
                 outln!("RGB {:.6e} {:.6e} {:.6e}  (linear {space})", rgb[0], rgb[1], rgb[2]);
+                if let Some(s) = sun {
+                    let (e, l) = (s.irradiance_rgb, s.disk_radiance_rgb);
+                    outln!("sun irradiance RGB {:.6e} {:.6e} {:.6e}  (on a surface facing it; lux-like units)", e[0], e[1], e[2]);
+                    outln!("sun disk radiance RGB {:.6e} {:.6e} {:.6e}  (a disk {:.4} deg across)", l[0], l[1], l[2], s.angular_diameter_deg);
+                }
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -28,6 +28,21 @@ pub struct Luts {
     pub manifest: Manifest,
     /// In the manifest's sky order.
     pub textures: Vec<Texture>,
+    /// The transmittance file's layers (per basis sky, see
+    /// `SunEntry::transmittance_layer`), RGB, row-major; empty for a bake
+    /// without one.
+    pub transmittance: Vec<Vec<[f32; 3]>>,
+}
+
+/// The sun at the observer, decoded: what the sky texture leaves out.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Sun {
+    /// Irradiance on a surface facing the sun, linear RGB of the manifest's
+    /// colour space (Y-like units: lux for XYZ).
+    pub irradiance_rgb: [f64; 3],
+    /// The disk's radiance (irradiance over its solid angle).
+    pub disk_radiance_rgb: [f64; 3],
+    pub angular_diameter_deg: f64,
 }
 
 /// Where a direction is read: sun zenith angle, the direction in the frame
@@ -214,7 +229,70 @@ impl Luts {
             let layers = words.chunks(texels).map(<[[f32; 3]]>::to_vec).collect();
             textures.push(Texture { width: e.width, height: e.height, layers });
         }
-        Ok(Luts { manifest, textures })
+        let mut transmittance = Vec::new();
+        if let Some(t) = &manifest.transmittance {
+            let path = dir.join(&t.file);
+            let bytes = std::fs::read(&path).map_err(|err| load_error(&path, err.to_string()))?;
+            let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
+            let h = r.header();
+            let format = h.format.map(|f| f.value()).unwrap_or(0);
+            let (w, ht) = (super::transmittance::WIDTH, super::transmittance::HEIGHT);
+            if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT || (h.pixel_width as usize, h.pixel_height as usize) != (w, ht) || h.layer_count as usize != t.layers.len() {
+                return Err(load_error(
+                    &path,
+                    format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 97, {w} x {ht} x {} layers", h.pixel_width, h.pixel_height, h.layer_count, t.layers.len()),
+                ));
+            }
+            let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
+            if level.data.len() != 8 * w * ht * t.layers.len() {
+                return Err(load_error(&path, format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * w * ht * t.layers.len())));
+            }
+            let texels: Vec<[f32; 3]> = level
+                .data
+                .chunks_exact(8)
+                .map(|b| {
+                    let h = [0, 2, 4, 6].map(|i| u16::from_le_bytes([b[i], b[i + 1]]));
+                    let v = super::rgba16f::unpack(h);
+                    [v[0], v[1], v[2]]
+                })
+                .collect();
+            transmittance = texels.chunks(w * ht).map(<[[f32; 3]]>::to_vec).collect();
+        }
+        Ok(Luts { manifest, textures, transmittance })
+    }
+
+    /// The transmittance toward the top of one basis sky (manifest index
+    /// `sky`) from `altitude_km` along cosine `mu`, per channel; None
+    /// without a transmittance file.
+    pub fn sun_transmittance(&self, sky: usize, altitude_km: f64, mu: f64) -> Option<[f64; 3]> {
+        let e = &self.manifest.skies[sky];
+        let layer = self.transmittance.get(e.sun.as_ref()?.transmittance_layer)?;
+        let mapping = super::transmittance::TransmittanceMapping::new(e.planet_radius_km, e.top_km);
+        Some(super::transmittance::sample(&mapping, |i| layer[i].map(f64::from), altitude_km, mu))
+    }
+
+    /// The sun at each basis sky's observer for a sun at
+    /// `sun_elevation_deg`, blended by haziness and cloudiness as the sky
+    /// is: Σ_k w_k top_k · T_k(observer, sun); None without sun data.
+    pub fn sun(&self, sun_elevation_deg: f64, haziness: f64, cloudiness: f64) -> Option<Sun> {
+        let w = basis_weights(haziness, cloudiness);
+        let mu = libm::sin(sun_elevation_deg.to_radians());
+        let (mut irradiance, mut present, mut diameter, mut omega) = ([0.0; 3], 0.0, 0.0, 1.0);
+        for (k, name) in super::weather::BASIS.iter().enumerate() {
+            let Some(i) = self.manifest.skies.iter().position(|s| s.name == *name) else { continue };
+            let e = &self.manifest.skies[i];
+            let sun = e.sun.as_ref()?;
+            let t = self.sun_transmittance(i, e.altitude_m / 1000.0, mu)?;
+            for c in 0..3 {
+                irradiance[c] += w[k] * sun.top_irradiance_rgb[c] * t[c];
+            }
+            present += w[k];
+            (diameter, omega) = (sun.angular_diameter_deg, sun.solid_angle_sr);
+        }
+        if present > 0.0 && present < 1.0 {
+            irradiance = irradiance.map(|x| x / present);
+        }
+        Some(Sun { irradiance_rgb: irradiance, disk_radiance_rgb: irradiance.map(|x| x / omega), angular_diameter_deg: diameter })
     }
 }
 
@@ -271,6 +349,7 @@ mod tests {
             texels_clamped: 0,
             texels_denormal: 0,
             texels_negative_rgb: 0,
+            sun: None,
         };
         (entry, Texture { width: w, height: h, layers })
     }
@@ -341,7 +420,7 @@ mod tests {
         let t2 = Texture { layers: t.layers.iter().map(|l| l.iter().map(|p| p.map(|v| 3.0 * v)).collect()).collect(), ..t.clone() };
         e.name = "clear".into();
         let manifest = crate::lut::manifest::tests::manifest_with(vec![e, hazed]);
-        let luts = Luts { manifest, textures: vec![t, t2] };
+        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new() };
         let d = crate::render::camera::direction_deg(50.0, 20.0);
         let clear = luts.sample(30.0, 0.0, 0.0, 0.0, d);
         let half = luts.sample(30.0, 0.0, 0.5, 0.0, d);

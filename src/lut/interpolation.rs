@@ -178,6 +178,7 @@ pub fn in_memory_bake(model: &dyn SkyModel, width: usize, height: usize, radius_
         texels_clamped: 0,
         texels_denormal: 0,
         texels_negative_rgb: 0,
+        sun: None,
     };
     (entry, Texture { width, height, layers: texels })
 }

@@ -28,6 +28,48 @@ pub struct Manifest {
     pub weather: Weather,
     /// The basis skies in the talk's order.
     pub skies: Vec<SkyEntry>,
+    /// The sun's transmittance table of every basis sky (added in version
+    /// 2; absent from bakes made before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub transmittance: Option<TransmittanceEntry>,
+}
+
+/// The transmittance LUT file: one RGBA16F 2-D array, a layer per basis
+/// sky (`lut::transmittance`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TransmittanceEntry {
+    pub file: String,
+    /// "R16G16B16A16_SFLOAT" (vkFormat 97).
+    pub format: String,
+    pub vk_format: u32,
+    pub bytes: u64,
+    pub width: usize,
+    pub height: usize,
+    /// The basis sky of each layer.
+    pub layers: Vec<String>,
+    /// How a texel's (u, v) maps to (radius, cosine of the zenith angle).
+    pub mapping: String,
+    /// What the channels hold.
+    pub channels: String,
+}
+
+/// The sun of one basis sky: what the sky texture leaves out.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SunEntry {
+    /// Full angular diameter of the disk, degrees.
+    pub angular_diameter_deg: f64,
+    /// Solid angle of the disk, sr: disk radiance = irradiance / this.
+    pub solid_angle_sr: f64,
+    /// The sun's irradiance above the atmosphere on a surface facing it:
+    /// CIE XYZ (lux) and linear RGB of the manifest's colour space.
+    pub top_irradiance_xyz: [f64; 3],
+    pub top_irradiance_rgb: [f64; 3],
+    /// The layer of the transmittance file that is this sky's.
+    pub transmittance_layer: usize,
+    /// Per slice: the irradiance at the observer (XYZ in lux, and RGB),
+    /// 0 once the sun is below the horizon.
+    pub irradiance_xyz: Vec<[f64; 3]>,
+    pub irradiance_rgb: Vec<[f64; 3]>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -116,6 +158,9 @@ pub struct SkyEntry {
     pub texels_clamped: u64,
     pub texels_denormal: u64,
     pub texels_negative_rgb: u64,
+    /// The sun (added in version 2; absent from bakes made before it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sun: Option<SunEntry>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -187,6 +232,7 @@ pub(crate) mod tests {
             direction_mapping: direction_mapping(),
             weather: weather(),
             skies,
+            transmittance: None,
         }
     }
 
