@@ -19,6 +19,7 @@
 use super::lighting::SkyLighting;
 use super::run::SkySlices;
 use super::BakeError;
+use crate::lut::ambient::{self, Ambient};
 use crate::lut::colour::ColourSpace;
 use crate::lut::decode::mat_mul;
 use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
@@ -81,6 +82,18 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         let rel: Vec<f64> = slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
         slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel) });
     }
+    // Ambient light of each slice, from its rendered XYZ read as the
+    // decoder reads it, in the bake's colour space.
+    let to_rgb = colour.xyz_to_rgb();
+    let ambient: Vec<Ambient> = s
+        .slices
+        .iter()
+        .map(|slice| {
+            let slice = slice.as_ref().expect("pack_sky needs every slice");
+            let m = mapping::DirectionMapping::new(slice.sun_zenith_deg, s.threshold_deg);
+            ambient::of_slice(&slice.xyz, w, h, &m).transformed(&to_rgb)
+        })
+        .collect();
     let file = format!("{}.ktx2", s.sky.name);
     let entry = SkyEntry {
         name: s.sky.name.clone(),
@@ -104,11 +117,16 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         texels_denormal: stats.denormal_texels,
         texels_negative_rgb: negative,
         sun: s.lighting.as_ref().map(|l| sun_entry(l, colour)),
+        ambient: Some(ambient),
     };
-    // The file carries its own manifest entry (less its size, which the
-    // file cannot know), under the `sky` key.
+    // The file carries its own manifest entry under the `sky` key, less
+    // its size (which the file cannot know) and the sun and ambient light
+    // (the manifest's, about 50 KB a sky: not what identifies the texels).
     let mut inner = serde_json::to_value(&entry).expect("an entry always serialises");
-    inner.as_object_mut().expect("an object").remove("bytes");
+    let object = inner.as_object_mut().expect("an object");
+    for key in ["bytes", "sun", "ambient"] {
+        object.remove(key);
+    }
     let sky_json = inner.to_string();
     Ok(PackedSky { entry, stats, words, sky_json })
 }
@@ -177,6 +195,39 @@ fn write_transmittance(skies: &[SkySlices], entries: &mut [SkyEntry], colour: Co
     Ok(Some(entry))
 }
 
+/// Pretty JSON with every array of plain numbers on one line (`[1.0, 2.0,
+/// 3.0]`): the per-slice colours and harmonics would otherwise take a line
+/// a number. Brackets inside strings are left alone.
+fn compact_number_arrays(pretty: &str) -> String {
+    let b = pretty.as_bytes();
+    let mut out = String::with_capacity(pretty.len());
+    let (mut i, mut copied, mut in_string, mut escaped) = (0, 0, false, false);
+    while i < b.len() {
+        let c = b[i];
+        if in_string {
+            (escaped, in_string) = (!escaped && c == b'\\', escaped || c != b'"');
+        } else if c == b'"' {
+            in_string = true;
+        } else if c == b'[' {
+            if let Some(len) = pretty[i + 1..].find(']') {
+                let inner = &pretty[i + 1..i + 1 + len];
+                if !inner.trim().is_empty() && inner.bytes().all(|c| c.is_ascii_digit() || b" \n,.-+eE".contains(&c)) {
+                    out.push_str(&pretty[copied..i]);
+                    out.push('[');
+                    out.push_str(&inner.split(',').map(str::trim).collect::<Vec<_>>().join(", "));
+                    out.push(']');
+                    i += len + 2;
+                    copied = i;
+                    continue;
+                }
+            }
+        }
+        i += 1;
+    }
+    out.push_str(&pretty[copied..]);
+    out
+}
+
 /// The manifest of packed skies.
 pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Manifest {
     Manifest {
@@ -221,7 +272,7 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
     let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
     let mut m = manifest(quality, colour, entries);
     m.transmittance = transmittance;
-    let text = serde_json::to_string_pretty(&m).expect("a manifest always serialises");
+    let text = compact_number_arrays(&serde_json::to_string_pretty(&m).expect("a manifest always serialises"));
     let path = dir.join("manifest.json");
     crate::lut::atomic::write_atomically(&path, text.as_bytes()).map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;
     Ok((m, stats))
@@ -230,6 +281,15 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn number_arrays_go_on_one_line_and_strings_stay() {
+        let v = serde_json::json!({ "a": [1.0, -2.5e-7, 3], "s": "in [0,1] \\\" [2,3]", "m": [[1, 2], [3, 4]], "e": [], "o": [{ "x": 1 }] });
+        let text = compact_number_arrays(&serde_json::to_string_pretty(&v).unwrap());
+        assert!(text.contains("\"a\": [1.0, -2.5e-7, 3]"), "{text}");
+        assert!(text.contains("[1, 2]") && text.contains("[3, 4]"), "{text}");
+        assert_eq!(serde_json::from_str::<serde_json::Value>(&text).unwrap(), v);
+    }
 
     #[test]
     fn slice_scales_put_the_maximum_just_below_2_to_the_15() {

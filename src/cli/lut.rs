@@ -170,8 +170,9 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             let space = &luts.manifest.colour.space;
             // The sun the sky texture leaves out (bakes with a transmittance file).
             let sun = luts.sun(c.sun_elevation_deg, c.haziness, c.cloudiness);
+            let ambient = luts.ambient(c.sun_elevation_deg, c.haziness, c.cloudiness);
             if a.json {
-                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun }));
+                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun, "ambient": ambient }));
             } else {
                 outln!("XYZ {:.6e} {:.6e} {:.6e}  (Y in cd/m^2)", xyz[0], xyz[1], xyz[2]);
                 outln!("RGB {:.6e} {:.6e} {:.6e}  (linear {space})", rgb[0], rgb[1], rgb[2]);
@@ -179,6 +180,10 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
                     let (e, l) = (s.irradiance_rgb, s.disk_radiance_rgb);
                     outln!("sun irradiance RGB {:.6e} {:.6e} {:.6e}  (on a surface facing it; lux-like units)", e[0], e[1], e[2]);
                     outln!("sun disk radiance RGB {:.6e} {:.6e} {:.6e}  (a disk {:.4} deg across)", l[0], l[1], l[2], s.angular_diameter_deg);
+                }
+                if let Some(am) = ambient {
+                    let (e, l) = (am.irradiance_up, am.mean_radiance);
+                    outln!("sky irradiance on an upward surface RGB {:.6e} {:.6e} {:.6e}; mean sky radiance {:.6e} {:.6e} {:.6e}", e[0], e[1], e[2], l[0], l[1], l[2]);
                 }
             }
             Ok(ExitCode::SUCCESS)

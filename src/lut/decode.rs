@@ -79,16 +79,7 @@ impl Texture {
 /// One basis sky's linear RGB toward `dir` (world frame, z up) with the
 /// sun at `sun_zenith_deg`, `sun_azimuth_deg`.
 pub fn sample_sky(entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, sun_azimuth_deg: f64, dir: DVec3) -> [f64; 3] {
-    let s = mapping::slice_coordinate(sun_zenith_deg, entry.planet_radius_km, entry.top_km);
-    let last = entry.layers - 1;
-    let i0 = (s.floor() as usize).min(last.saturating_sub(1));
-    let i1 = (i0 + 1).min(last);
-    // The fraction of the way in sun zenith angle from slice i0 to i1 (not
-    // in the slice coordinate, which is quadratic in the angle below the
-    // horizon): with the geometric blend, a sky that changes exponentially
-    // with the sun's angle decodes exactly.
-    let (z0, z1) = (entry.slices[i0].sun_zenith_deg, entry.slices[i1].sun_zenith_deg);
-    let f = if z1 > z0 { ((sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG) - z0) / (z1 - z0)).clamp(0.0, 1.0) } else { 0.0 };
+    let (i0, i1, f) = slice_pair(entry, sun_zenith_deg);
     let d = rotate_to_sun_frame(dir, sun_azimuth_deg);
     // The mapping of the actual sun; each slice in its own region.
     let m = DirectionMapping::new(sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG), entry.threshold_sun_zenith_deg);
@@ -106,6 +97,22 @@ pub fn sample_sky(entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, sun_
     }
     let (a, b) = (read(i0), read(i1));
     [0, 1, 2].map(|c| between_slices(a[c], b[c], f))
+}
+
+/// The two slices a sun at `sun_zenith_deg` reads and the fraction of the
+/// way from the first to the second.
+pub fn slice_pair(entry: &SkyEntry, sun_zenith_deg: f64) -> (usize, usize, f64) {
+    let s = mapping::slice_coordinate(sun_zenith_deg, entry.planet_radius_km, entry.top_km);
+    let last = entry.layers - 1;
+    let i0 = (s.floor() as usize).min(last.saturating_sub(1));
+    let i1 = (i0 + 1).min(last);
+    // The fraction of the way in sun zenith angle from slice i0 to i1 (not
+    // in the slice coordinate, which is quadratic in the angle below the
+    // horizon): with the geometric blend, a sky that changes exponentially
+    // with the sun's angle decodes exactly.
+    let (z0, z1) = (entry.slices[i0].sun_zenith_deg, entry.slices[i1].sun_zenith_deg);
+    let f = if z1 > z0 { ((sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG) - z0) / (z1 - z0)).clamp(0.0, 1.0) } else { 0.0 };
+    (i0, i1, f)
 }
 
 /// One channel between two slices at fraction `f`: geometric, a^(1−f) b^f,
@@ -271,6 +278,23 @@ impl Luts {
         Some(super::transmittance::sample(&mapping, |i| layer[i].map(f64::from), altitude_km, mu))
     }
 
+    /// Ambient light from the sky for a sun at `sun_elevation_deg`: each
+    /// basis sky's between its two slices (linearly: the harmonics may be
+    /// negative), blended by the weather rule; None without ambient data.
+    pub fn ambient(&self, sun_elevation_deg: f64, haziness: f64, cloudiness: f64) -> Option<super::ambient::Ambient> {
+        use super::ambient::Ambient;
+        let w = basis_weights(haziness, cloudiness);
+        let (mut out, mut present) = (Ambient::zero(), 0.0);
+        for (k, name) in super::weather::BASIS.iter().enumerate() {
+            let Some(e) = self.manifest.skies.iter().find(|s| s.name == *name) else { continue };
+            let a = e.ambient.as_ref()?;
+            let (i0, i1, f) = slice_pair(e, 90.0 - sun_elevation_deg);
+            out.add_scaled(&Ambient::lerp(&a[i0], &a[i1], f), w[k]);
+            present += w[k];
+        }
+        Some(if present > 0.0 && present < 1.0 { out.scaled(1.0 / present) } else { out })
+    }
+
     /// The sun at each basis sky's observer for a sun at
     /// `sun_elevation_deg`, blended by haziness and cloudiness as the sky
     /// is: Σ_k w_k top_k · T_k(observer, sun); None without sun data.
@@ -350,6 +374,7 @@ mod tests {
             texels_denormal: 0,
             texels_negative_rgb: 0,
             sun: None,
+            ambient: None,
         };
         (entry, Texture { width: w, height: h, layers })
     }

@@ -179,6 +179,7 @@ pub fn in_memory_bake(model: &dyn SkyModel, width: usize, height: usize, radius_
         texels_denormal: 0,
         texels_negative_rgb: 0,
         sun: None,
+        ambient: None,
     };
     (entry, Texture { width, height, layers: texels })
 }

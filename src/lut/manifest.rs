@@ -161,6 +161,12 @@ pub struct SkyEntry {
     /// The sun (added in version 2; absent from bakes made before it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sun: Option<SunEntry>,
+    /// Per slice, ambient light from the sky in the manifest's colour
+    /// space: irradiance on an upward surface, mean radiance of the upper
+    /// hemisphere, order-2 spherical harmonics of the whole sphere
+    /// (`lut::ambient`; added in version 2).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient: Option<Vec<super::ambient::Ambient>>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -3,6 +3,7 @@
 //! reference decoder, and the texture formats and files the tables are
 //! stored in.
 
+pub mod ambient;
 pub mod atomic;
 pub mod colour;
 pub mod colour_error;
