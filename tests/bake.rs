@@ -248,6 +248,24 @@ fn changing_one_atmosphere_rerenders_only_its_slices() {
     assert_eq!(rendered(&again), [("clear".to_string(), 0, 64), ("hazed".to_string(), 63, 1)]);
 }
 
+/// The files in `d` ending in `.ext`.
+fn files(d: &Path, ext: &str) -> Vec<PathBuf> {
+    std::fs::read_dir(d).map(|r| r.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == ext)).collect()).unwrap_or_default()
+}
+
+/// Waits (30 s at most) until a journal in the cache folder `cache` holds
+/// a column: a basis sky's slices are one farm job, journaled column by
+/// column; a journal's header is about 130 bytes, a column of 16 texels
+/// several hundred more.
+fn wait_for_a_journaled_column(cache: &Path) {
+    let journaled = || files(cache, "journal").iter().any(|p| std::fs::metadata(p).map(|m| m.len() > 400).unwrap_or(false));
+    let mut waited = 0;
+    while !journaled() && waited < 6000 {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+        waited += 1;
+    }
+}
+
 #[test]
 fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -261,17 +279,8 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let files = |d: &Path, ext: &str| -> Vec<PathBuf> { std::fs::read_dir(d).map(|r| r.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == ext)).collect()).unwrap_or_default() };
-    // A basis sky's slices are one farm job, journaled column by column:
-    // SIGKILL once a journal holds a column (its header is about 130 bytes,
-    // a column of 16 texels several hundred more), with no chance to
-    // clean up.
-    let journaled = |d: &Path| files(d, "journal").iter().any(|p| std::fs::metadata(p).map(|m| m.len() > 400).unwrap_or(false));
-    let mut waited = 0;
-    while !journaled(&cache) && waited < 6000 {
-        std::thread::sleep(std::time::Duration::from_millis(5));
-        waited += 1;
-    }
+    // SIGKILL once a column is journaled, with no chance to clean up.
+    wait_for_a_journaled_column(&cache);
     child.kill().unwrap();
     child.wait().unwrap();
     let done = files(&cache, "slice").len();
@@ -308,13 +317,7 @@ fn ctrl_c_stops_a_bake_that_then_resumes() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let journaled =
-        || std::fs::read_dir(&cache).map(|r| r.flatten().any(|e| e.path().extension().is_some_and(|x| x == "journal") && e.metadata().map(|m| m.len() > 400).unwrap_or(false))).unwrap_or(false);
-    let mut waited = 0;
-    while !journaled() && waited < 6000 {
-        std::thread::sleep(std::time::Duration::from_millis(5));
-        waited += 1;
-    }
+    wait_for_a_journaled_column(&cache);
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
     let o = child.wait_with_output().unwrap();
     let err = String::from_utf8_lossy(&o.stderr);

@@ -450,26 +450,25 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let Some(session) = &sessions[k] else { continue };
             let sky = &p.out.sky;
             let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
-            for (n, &index) in PROBE_SLICES.iter().filter(|&&i| i < sky.slices).enumerate() {
+            for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
                 tracker.lock().unwrap().current = (sky.name.clone(), index);
                 let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
                 let probe = View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full };
-                let render = |v: &View| session.render_view(v, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index, source });
-                if n == 0 {
-                    // Untimed: connects the workers and sends them the optics.
-                    render(&View { width: 1, height: 1, ..probe.clone() })?;
-                }
-                // A render's cost is a part per render (the farm job, the
-                // tracers and guides of its sun), which a probe's few texels
-                // would overstate per texel, and a part per texel: a
-                // one-texel render of the same view tells them apart.
+                // Rendered here, on this process's threads, in one piece: on
+                // the farm a probe's few columns would go out as several
+                // small tasks, each preparing the tracers and guides of its
+                // sun again, a cost the slices' large tasks spread thin (the
+                // forecast came out 43 % high). The rest of a render's cost
+                // per render, not per texel, a one-texel render of the same
+                // view measures.
+                let threads = rayon::current_num_threads() as f64;
                 let timed = |v: &View| -> Result<f64, BakeError> {
                     let t = Instant::now();
-                    render(v)?;
-                    Ok(t.elapsed().as_secs_f64() * opts.cores as f64)
+                    crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+                    Ok(t.elapsed().as_secs_f64() * threads)
                 };
                 let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
                 let texels = (probe.width * probe.height) as f64;
@@ -673,26 +672,22 @@ mod tests {
     use super::*;
     use crate::render::{render, Scene};
 
+    /// The DISORT Rayleigh + HG slab as a basis sky of `width` × `height`
+    /// texels sampled as `sampling`, with its prepared optics.
+    fn test_sky(width: usize, height: usize, sampling: &Sampling) -> (Atmosphere, Scene, BasisSky) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh_hg.toml");
+        let atm = Atmosphere::load(&path).unwrap();
+        let scene = Scene::new(&atm, &spectral_settings(sampling), &MieCache::new(None), &|| {});
+        let sky = BasisSky { name: "t".into(), atmosphere: path, width, height, slices: 64, altitude_m: 0.0, threshold_deg: 87.5, line: 1, draft: sampling.clone(), final_: sampling.clone() };
+        (atm, scene, sky)
+    }
+
     /// The forecast's core: a slice's pilot, rendered on its own, plans
     /// exactly the samples each texel of the adaptive render then takes.
     #[test]
     fn pilots_plan_every_texels_samples_exactly() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
         let sampling = Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05) };
-        let scene = Scene::new(&atm, &spectral_settings(&sampling), &MieCache::new(None), &|| {});
-        let sky = BasisSky {
-            name: "t".into(),
-            atmosphere: root.join("tests/atmospheres/disort_rayleigh_hg.toml"),
-            width: 4,
-            height: 16,
-            slices: 64,
-            altitude_m: 0.0,
-            threshold_deg: 87.5,
-            line: 1,
-            draft: sampling.clone(),
-            final_: sampling.clone(),
-        };
+        let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let mut total = 0u64;
         for index in [10, 40, 50] {
@@ -714,22 +709,8 @@ mod tests {
     /// slice into the next, and with an adaptive sample count.
     #[test]
     fn a_strip_renders_each_slice_as_it_renders_alone() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
         let sampling = Sampling { band_nm: 40.0, spp: 128, max_rel_error: Some(0.3) };
-        let scene = Scene::new(&atm, &spectral_settings(&sampling), &MieCache::new(None), &|| {});
-        let sky = BasisSky {
-            name: "t".into(),
-            atmosphere: root.join("tests/atmospheres/disort_rayleigh_hg.toml"),
-            width: 3,
-            height: 8,
-            slices: 64,
-            altitude_m: 0.0,
-            threshold_deg: 87.5,
-            line: 1,
-            draft: sampling.clone(),
-            final_: sampling.clone(),
-        };
+        let (atm, scene, sky) = test_sky(3, 8, &sampling);
         let cancel = AtomicBool::new(false);
         // Day, the sun-centred mapping's last slices, twilight.
         let views: Vec<View> = [20, 47, 52, 60].iter().map(|&i| slice_view(&sky, &sampling, i, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg)).collect();
