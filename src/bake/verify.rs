@@ -87,6 +87,16 @@ pub struct ElevationError {
     /// scattering sky is no proxy (the Earth's shadow gives it sharp edges
     /// that light scattered more than once fills in).
     pub interpolation: Option<InterpolationSplit>,
+    /// The decoded sun (top irradiance times the transmittance file) against
+    /// the sun's irradiance at the observer straight from the optics' column
+    /// table, what the renderer's direct sun uses: |ΔY| / Y (None with the
+    /// sun below the horizon or a bake without a transmittance file).
+    pub sun_rel_y: Option<f64>,
+    /// The decoded ambient irradiance on an upward surface against a direct
+    /// integration of the reference render over its lattice (uniform in
+    /// solid angle above 0.5° elevation): |ΔY| / Y (None without ambient
+    /// data or a lit reference).
+    pub ambient_rel_y: Option<f64>,
 }
 
 /// See [`ElevationError::interpolation`].
@@ -118,7 +128,7 @@ pub struct SkyVerification {
 }
 
 /// The `p` quantile (nearest rank) of `v`, which it sorts; NaN if empty.
-pub(crate) fn percentile(v: &mut [f64], p: f64) -> f64 {
+pub fn percentile(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }
@@ -218,6 +228,8 @@ pub fn verify(
                 peak = peak.max(x[1]);
             }
             let n = rel.len().max(1) as f64;
+            let sun_rel_y = sun_error(luts, entry, &session, sky.altitude_m, elev);
+            let ambient_rel_y = ambient_error(luts, entry, &dirs, &reference, elev);
             let mut ref_rel: Vec<f64> = r.image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
             errors.push(ElevationError {
                 sun_elevation_deg: elev,
@@ -241,6 +253,8 @@ pub fn verify(
                     direction_only_median_rel_y: direction.median,
                     direction_only_p99_rel_y: direction.p99,
                 }),
+                sun_rel_y,
+                ambient_rel_y,
             });
         }
         let mut noise: Vec<f64> = entry.slices.iter().map(|s| s.median_rel_stderr_y).collect();
@@ -251,6 +265,37 @@ pub fn verify(
         out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp });
     }
     Ok(out)
+}
+
+/// Y of linear RGB in the manifest's colour space.
+fn y_of(luts: &Luts, rgb: [f64; 3]) -> f64 {
+    crate::lut::decode::mat_mul(&luts.manifest.colour.xyz_from_rgb, rgb)[1]
+}
+
+/// See [`ElevationError::sun_rel_y`].
+fn sun_error(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, session: &Session, altitude_m: f64, elevation_deg: f64) -> Option<f64> {
+    if elevation_deg <= 0.0 {
+        return None;
+    }
+    let i = luts.manifest.skies.iter().position(|s| s.name == entry.name)?;
+    let mu = libm::sin(elevation_deg.to_radians());
+    let top = entry.sun.as_ref()?.top_irradiance_rgb;
+    let t = luts.sun_transmittance(i, altitude_m / 1000.0, mu)?;
+    let decoded = y_of(luts, std::array::from_fn(|c| top[c] * t[c]));
+    let want = crate::lut::transmittance::sun_xyz_at(&session.scene, altitude_m / 1000.0, mu)[1];
+    (want > 0.0).then(|| (decoded - want).abs() / want)
+}
+
+/// See [`ElevationError::ambient_rel_y`].
+fn ambient_error(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, dirs: &[(f64, f64)], reference: &[[f64; 3]], elevation_deg: f64) -> Option<f64> {
+    let a = entry.ambient.as_ref()?;
+    let (i0, i1, f) = crate::lut::decode::slice_pair(entry, 90.0 - elevation_deg);
+    let decoded = y_of(luts, crate::lut::ambient::Ambient::lerp(&a[i0], &a[i1], f).irradiance_up);
+    // The lattice is uniform in solid angle over 2π (1 − sin 0.5°).
+    let mu_min = libm::sin(0.5f64.to_radians());
+    let weight = 2.0 * std::f64::consts::PI * (1.0 - mu_min) / dirs.len() as f64;
+    let want: f64 = dirs.iter().zip(reference).map(|(&(z, _), x)| x[1] * libm::cos(z.to_radians()) * weight).sum();
+    (want > 0.0).then(|| (decoded - want).abs() / want)
 }
 
 /// The rounding error of the stored texels against the rendered ones, from

@@ -337,6 +337,18 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
             );
         }
     }
+    for s in &report {
+        let summary = |v: Vec<f64>| {
+            let mut v = v;
+            if v.is_empty() {
+                return "n/a".to_string();
+            }
+            let m = sky::bake::verify::percentile(&mut v.clone(), 0.5);
+            format!("median {:.3} %, p99 {:.3} % over {} elevations", 100.0 * m, 100.0 * sky::bake::verify::percentile(&mut v, 0.99), v.len())
+        };
+        outln!("{} sun (decoded irradiance against the optics' column table): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.sun_rel_y).collect()));
+        outln!("{} ambient (decoded upward irradiance against the reference render integrated over its lattice): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.ambient_rel_y).collect()));
+    }
     outln!("interp: direction and slice interpolation together, direction: direction interpolation alone (median/p99), both measured on the atmosphere's noise-free single-scattering sky baked in memory at the bake's size (`sky lut interpolation`; ss: its share of the sky's luminance, median; n/a below the horizon, where that sky is no proxy)");
     for t in &twilight {
         outln!(
