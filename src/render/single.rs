@@ -104,12 +104,26 @@ impl<'a> SingleScattering<'a> {
     /// the observer), for each optics: W m⁻² sr⁻¹ nm⁻¹ times the optics'
     /// `sun_irradiance` units (sr⁻¹ for per-unit-irradiance bands).
     pub fn radiance(&self, dir: DVec3) -> Vec<f64> {
+        self.radiance_to(dir, f64::INFINITY, None)
+    }
+
+    /// [`radiance`](Self::radiance) of the air within `max_distance_km` of
+    /// the observer, in front of an opaque black object at that distance
+    /// (the ground counts only if the ray meets it first), and, with a
+    /// `ceiling_km`, of the air below that altitude only (scattering and
+    /// extinction along the view; the sunlight still comes through all of
+    /// the atmosphere): the single-scattered part of the talk's global fog
+    /// in front of a mountain ("only low-altitude atmosphere affects our
+    /// global fog").
+    pub fn radiance_to(&self, dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>) -> Vec<f64> {
         let m = self.medium;
         let d = dir.normalize();
         let n = self.optics.len();
         let mut out = vec![0.0; n];
-        let ground = m.distance_to_altitude(self.origin, d, 0.0, false);
-        let Some(end) = ground.or_else(|| m.distance_to_altitude(self.origin, d, m.top_km, true)) else { return out };
+        let ground = m.distance_to_altitude(self.origin, d, 0.0, false).filter(|&t| t < max_distance_km);
+        let Some(end) = ground.or_else(|| m.distance_to_altitude(self.origin, d, m.top_km, true).map(|t| t.min(max_distance_km))) else { return out };
+        // Steps end at the profiles' kinks and at the ceiling.
+        let kinks: Vec<f64> = m.kinks_km.iter().copied().chain(ceiling_km).collect();
         let mu_scatter = d.dot(self.sun);
         let phases: Vec<Vec<f64>> = self.optics.iter().map(|sp| sp.phase.iter().map(|p| p.eval(mu_scatter)).collect()).collect();
         // The view's transmittance to the current step, a running product
@@ -137,12 +151,13 @@ impl<'a> SingleScattering<'a> {
             let limit = |sigma: f64| if sigma > 0.0 { MAX_STEP_TAU / sigma * sun_factor } else { f64::INFINITY };
             ds = ds.min(limit(self.largest_sigma_t(z, &mut density)));
             ds = ds.min(limit(self.largest_sigma_t(m.altitude(p + d * ds).clamp(0.0, m.top_km), &mut density)));
-            ds = m.clip_at_kinks(p, d, ds, &m.kinks_km).max(1e-7);
+            ds = m.clip_at_kinks(p, d, ds, &kinks).max(1e-7);
             let x = self.origin + d * (s + 0.5 * ds);
             let zx = m.altitude(x).clamp(0.0, m.top_km);
             self.sun_transmittance(zx, m.up(x).dot(self.sun), &mut columns, &mut t_sun);
+            let above_ceiling = ceiling_km.is_some_and(|c| zx > c);
             for (i, rho) in density.iter_mut().enumerate() {
-                *rho = m.density(i, zx);
+                *rho = if above_ceiling { 0.0 } else { m.density(i, zx) };
             }
             for (k, sp) in self.optics.iter().enumerate() {
                 let mut sigma_t = 0.0;
@@ -238,6 +253,60 @@ mod tests {
                 (ss.radiance(d)[0], e * p * mu0 / (mu - mu0) * ((-tau / mu).exp() - (-tau / mu0).exp()))
             })
             .collect()
+    }
+
+    /// Single scattering to a finite distance (a black object there) and
+    /// under a ceiling, against an independent numerical quadrature of its
+    /// integral in the flat exponential Rayleigh slab (8 km scale height):
+    /// ∫₀^d σ(z) p(Θ) T_view(s) T_sun(z) E ds with z = z₀ + s μ, both
+    /// transmittances in closed form (τ between two altitudes of an
+    /// exponential is σ₀ H |e^(−z₁/H) − e^(−z₂/H)| / |μ|; along a level ray
+    /// σ(z₀) s), integrated by the midpoint rule on 200 000 steps. Rays
+    /// level, 5° and 30° up, to 0.5, 5 and 40 km; within 0.1 %. Under a
+    /// 1 km ceiling a ray 30° up scatters only in its first 2 km, as the
+    /// same ray to 2 km does.
+    #[test]
+    fn single_scattering_to_a_distance_matches_quadrature() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh.toml")).unwrap();
+        let l = 550.0;
+        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![l], xyz: false };
+        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let sun_zenith_deg = 70.0;
+        let sun = direction_deg(sun_zenith_deg, 0.0);
+        let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
+        let o = &scene.line_optics[0];
+        let h = 8.0;
+        let sigma0 = o.extinction[0] * scene.medium.density(0, 0.0);
+        let top = scene.medium.top_km;
+        let e = atm.sun.irradiance_w_m2_nm.eval(l);
+        let mu0 = sun.z;
+        let z0 = scene.medium.altitude(scene.medium.observer(0.0));
+        let col = |a: f64, b: f64| sigma0 * h * ((-a / h).exp() - (-b / h).exp()).abs();
+        for elevation in [0.0f64, 5.0, 30.0] {
+            let d = direction_deg(90.0 - elevation, 150.0);
+            let mu = d.z;
+            let p = 3.0 / (16.0 * PI) * (1.0 + d.dot(sun).powi(2));
+            for dist in [0.5, 5.0, 40.0] {
+                let steps = 200_000;
+                let ds = dist / steps as f64;
+                let want: f64 = (0..steps)
+                    .map(|k| {
+                        let s = (k as f64 + 0.5) * ds;
+                        let z = z0 + s * mu;
+                        let tau_view = if mu.abs() < 1e-12 { sigma0 * (-z0 / h).exp() * s } else { col(z0, z) / mu.abs() };
+                        let tau_sun = col(z, top) / mu0;
+                        sigma0 * (-z / h).exp() * p * (-tau_view).exp() * (-tau_sun).exp() * e * ds
+                    })
+                    .sum();
+                let ours = ss.radiance_to(d, dist, None)[0];
+                assert!((ours / want - 1.0).abs() < 1e-3, "{elevation} deg up, {dist} km: {ours:e} against {want:e}");
+            }
+        }
+        let d = direction_deg(60.0, 150.0);
+        let (under, short) = (ss.radiance_to(d, 40.0, Some(1.0))[0], ss.radiance_to(d, 2.0, None)[0]);
+        assert!((under / short - 1.0).abs() < 2e-3, "under a 1 km ceiling {under:e}, to 2 km {short:e}");
+        assert!(ss.radiance_to(d, f64::INFINITY, None)[0] > 2.0 * short);
     }
 
     /// The same slab curved around the Earth, seen near the zenith with a
