@@ -57,6 +57,7 @@ demo: build
 	$(SKY) bake-luts bakes/demo.toml --out $(OUT)/luts --quality draft
 	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --directions 200 --spp 64 --plot $(OUT)/luts/verify
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --camera fisheye --size 256x256 --out $(OUT)/decoded.exr --png $(OUT)/decoded.png
+	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 60,180
 	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png;"
 	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 arrays), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png"
 
