@@ -3,8 +3,10 @@
 //! through `node tests/ktx_parse/check.mjs`. (The first, the `ktx2` crate,
 //! is in the module's unit tests.)
 //!
-//! Needs `node` and `npm ci --prefix tests/ktx_parse`, which `make test`
-//! runs. Without them the test fails, on purpose: CI must not skip it.
+//! Needs `node` and `npm`: the test installs the pinned package itself
+//! (`npm ci --prefix tests/ktx_parse`, once, if it is missing; `make test`
+//! also runs it). Without node the test fails, on purpose: CI must not
+//! skip it.
 
 use serde_json::{json, Value};
 use sky::lut::colour::ColourSpace;
@@ -19,11 +21,29 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// Installs the pinned ktx-parse into `dir` if it is not there (once per
+/// test process: the tests of this file share it).
+fn install_ktx_parse(dir: &Path) {
+    static INSTALLED: std::sync::OnceLock<()> = std::sync::OnceLock::new();
+    INSTALLED.get_or_init(|| {
+        if dir.join("node_modules/ktx-parse/package.json").exists() {
+            return;
+        }
+        let out = Command::new("npm")
+            .args(["ci", "--prefix"])
+            .arg(dir)
+            .args(["--no-audit", "--no-fund"])
+            .output()
+            .unwrap_or_else(|e| panic!("cannot run npm ({e}) to install ktx-parse: install Node.js and npm (e.g. apt-get install nodejs npm)"));
+        assert!(out.status.success(), "npm ci --prefix {} failed: {}", dir.display(), String::from_utf8_lossy(&out.stderr));
+    });
+}
+
 /// Runs check.mjs on `file` (with a time limit: ktx-parse loops forever on
 /// some malformed input) and parses its JSON.
 fn ktx_parse(file: &Path, data: bool) -> Value {
     let dir = root().join("tests/ktx_parse");
-    assert!(dir.join("node_modules/ktx-parse/package.json").exists(), "ktx-parse is not installed: run `npm ci --prefix tests/ktx_parse` (as `make test` does); needs node and npm");
+    install_ktx_parse(&dir);
     let mut cmd = Command::new("node");
     cmd.arg(dir.join("check.mjs")).arg(file);
     if data {
