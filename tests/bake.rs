@@ -87,7 +87,10 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     assert!(exr.exists() && png.exists());
     for camera in ["equirect", "pinhole"] {
         let out = tmp.path().join(format!("{camera}.exr"));
-        let o = sky(&["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "5", "--haziness", "0.7", "--camera", camera, "--size", "24x12", "--out", out.to_str().unwrap()], tmp.path());
+        let o = sky(
+            &["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "5", "--haziness", "0.7", "--camera", camera, "--size", "24x12", "--sun-disk", "--out", out.to_str().unwrap()],
+            tmp.path(),
+        );
         assert!(o.status.success() && out.exists(), "{camera}: {}", String::from_utf8_lossy(&o.stderr));
     }
     let o = sky(&["lut", "sample", m.to_str().unwrap(), "--sun-elevation-deg", "30", "--haziness", "0.5", "--direction", "50,120", "--json"], tmp.path());
@@ -199,6 +202,28 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         let direct = r.pixels[0].xyz_direct.map(|x| x * sun.solid_angle_sr);
         let want = sun.irradiance_xyz[index];
         assert!((direct[1] / want[1] - 1.0).abs() < 0.01, "slice {index} (sun zenith {zenith:.2}): rendered {direct:?}, manifest {want:?}");
+    }
+
+    // The decoded image's sun disk carries the sun's irradiance, whether it
+    // spans many pixels (a 2 degree pinhole on the sun) or falls inside one
+    // (a 64 x 32 equirect, pixels of 5.6 degrees): the image with the disk
+    // less the one without, times each pixel's solid angle, summed.
+    use sky::render::camera::Camera;
+    let elevation = 30.0f64;
+    let e_sun = sky::lut::decode::mat_mul(&luts.manifest.colour.xyz_from_rgb, luts.sun(elevation, 0.0, 0.0).unwrap().irradiance_rgb)[1];
+    let pinhole = Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: elevation, fov_deg: 2.0 };
+    let equirect = Camera::Equirect;
+    for (camera, w, h) in [(&pinhole, 64usize, 64usize), (&equirect, 64, 32)] {
+        let with = luts.decode_image(camera, w, h, elevation, 0.0, 0.0, 0.0, true).unwrap();
+        let without = luts.decode_image(camera, w, h, elevation, 0.0, 0.0, 0.0, false).unwrap();
+        let omega = |y: usize| match camera {
+            // Equirect: (2π / w)(cos θ₀ − cos θ₁) exactly.
+            Camera::Equirect => 2.0 * std::f64::consts::PI / w as f64 * ((std::f64::consts::PI * y as f64 / h as f64).cos() - (std::f64::consts::PI * (y + 1) as f64 / h as f64).cos()),
+            // A 2 degree pinhole: (fov / w)² to 1e-4.
+            _ => (2f64.to_radians() / w as f64).powi(2),
+        };
+        let flux: f64 = (0..w * h).map(|i| (with[i][1] - without[i][1]) * omega(i / w)).sum();
+        assert!((flux / e_sun - 1.0).abs() < 0.05, "{camera:?}: the disk carries {flux:.1} against the sun's {e_sun:.1}");
     }
 
     // Ambient light: the manifest's upward irradiance of a slice against a

@@ -121,6 +121,11 @@ pub struct DecodeArgs {
     /// PNG exposure, stops
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure_ev: f64,
+    /// Add the sun's disk from the bake's transmittance file (the sky
+    /// textures leave it out): its radiance where it covers pixel centres,
+    /// else its irradiance in the pixel nearest it
+    #[arg(long)]
+    sun_disk: bool,
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64), String> {
@@ -203,13 +208,11 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
                 CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
             };
             let (w, h) = a.size;
-            let pixels = (0..h)
-                .flat_map(|y| (0..w).map(move |x| (x, y)))
-                .map(|(x, y)| {
-                    let xyz = camera.direction(x as f64 + 0.5, y as f64 + 0.5, w, h).map_or([0.0; 3], |d| luts.sample_xyz(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d));
-                    PixelResult::from_xyz(xyz)
-                })
-                .collect();
+            let Some(xyz) = luts.decode_image(&camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.sun_disk) else {
+                eprintln!("sky lut decode: --sun-disk: {} has no sun (a bake made before the transmittance file); bake it again", a.manifest.display());
+                return Ok(ExitCode::from(EXIT_INVALID));
+            };
+            let pixels = xyz.into_iter().map(PixelResult::from_xyz).collect();
             let image = Image { width: w, height: h, pixels };
             let metadata = vec![
                 ("generator".to_string(), format!("sky {} lut decode", sky::VERSION)),

@@ -295,6 +295,63 @@ impl Luts {
         Some(if present > 0.0 && present < 1.0 { out.scaled(1.0 / present) } else { out })
     }
 
+    /// A whole image through `camera` (`width` × `height`), CIE XYZ per
+    /// pixel (row-major; 0 outside the camera's view), for the sun at
+    /// `sun_elevation_deg`, `sun_azimuth_deg`. With `sun_disk`, the sun's
+    /// disk is added from the transmittance file: its radiance in every
+    /// pixel whose centre it covers, or, where it falls between pixel
+    /// centres (a disk smaller than a pixel), its irradiance over the
+    /// solid angle of the pixel nearest to it, so the image carries the
+    /// sun's energy at any size. None if `sun_disk` and the bake has no sun.
+    pub fn decode_image(
+        &self,
+        camera: &crate::render::camera::Camera,
+        width: usize,
+        height: usize,
+        sun_elevation_deg: f64,
+        sun_azimuth_deg: f64,
+        haziness: f64,
+        cloudiness: f64,
+        sun_disk: bool,
+    ) -> Option<Vec<[f64; 3]>> {
+        let dirs: Vec<Option<DVec3>> = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height)).collect();
+        let mut xyz: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| self.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d))).collect();
+        if !sun_disk {
+            return Some(xyz);
+        }
+        let sun = self.sun(sun_elevation_deg, haziness, cloudiness)?;
+        let to_xyz = |rgb: [f64; 3]| mat_mul(&self.manifest.colour.xyz_from_rgb, rgb);
+        let s = crate::render::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
+        let cos_radius = libm::cos(0.5 * sun.angular_diameter_deg.to_radians());
+        let mut covered = false;
+        for (p, d) in xyz.iter_mut().zip(&dirs) {
+            if d.is_some_and(|d| d.dot(s) >= cos_radius) {
+                let l = to_xyz(sun.disk_radiance_rgb);
+                *p = std::array::from_fn(|c| p[c] + l[c]);
+                covered = true;
+            }
+        }
+        if !covered {
+            // The pixel whose centre is nearest the sun, and its solid angle
+            // from the directions through its corners.
+            let nearest = dirs.iter().enumerate().filter_map(|(i, d)| d.map(|d| (i, d.dot(s)))).max_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((i, _)) = nearest {
+                let (x, y) = ((i % width) as f64, (i / width) as f64);
+                let corner = |dx: f64, dy: f64| camera.direction(x + dx, y + dy, width, height);
+                if let (Some(a), Some(b), Some(c)) = (corner(0.0, 0.0), corner(1.0, 0.0), corner(0.0, 1.0)) {
+                    let omega = (b - a).cross(c - a).length();
+                    let half = 0.5 * (b - a).length().max((c - a).length());
+                    // Only when the sun is within the pixel, not off the image's edge.
+                    if omega > 0.0 && dirs[i].is_some_and(|d| libm::acos(d.dot(s).min(1.0)) <= half * std::f64::consts::SQRT_2) {
+                        let e = to_xyz(sun.irradiance_rgb);
+                        xyz[i] = std::array::from_fn(|k| xyz[i][k] + e[k] / omega);
+                    }
+                }
+            }
+        }
+        Some(xyz)
+    }
+
     /// The sun at each basis sky's observer for a sun at
     /// `sun_elevation_deg`, blended by haziness and cloudiness as the sky
     /// is: Σ_k w_k top_k · T_k(observer, sun); None without sun data.
