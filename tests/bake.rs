@@ -273,6 +273,18 @@ fn changing_one_atmosphere_rerenders_only_its_slices() {
     assert_eq!(rendered(&again), [("clear".to_string(), 0, 64), ("hazed".to_string(), 63, 1)]);
 }
 
+/// `sky bake-luts BAKE --out OUT` in the background (no Mie cache), its
+/// stderr to `stderr`.
+fn spawn_bake(bake: &Path, out: &Path, stderr: Stdio) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .env("SKY_CACHE_DIR", "off")
+        .stdout(Stdio::null())
+        .stderr(stderr)
+        .spawn()
+        .unwrap()
+}
+
 /// The files in `d` ending in `.ext`.
 fn files(d: &Path, ext: &str) -> Vec<PathBuf> {
     std::fs::read_dir(d).map(|r| r.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == ext)).collect()).unwrap_or_default()
@@ -297,13 +309,7 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("killed");
     let cache = out.join("cache");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .env("SKY_CACHE_DIR", "off")
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut child = spawn_bake(&bake, &out, Stdio::null());
     // SIGKILL once a column is journaled, with no chance to clean up.
     wait_for_a_journaled_column(&cache);
     child.kill().unwrap();
@@ -335,13 +341,7 @@ fn ctrl_c_stops_a_bake_that_then_resumes() {
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("stopped");
     let cache = out.join("cache");
-    let child = Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .env("SKY_CACHE_DIR", "off")
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let child = spawn_bake(&bake, &out, Stdio::piped());
     wait_for_a_journaled_column(&cache);
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGINT) }, 0);
     let o = child.wait_with_output().unwrap();

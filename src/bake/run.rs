@@ -180,6 +180,16 @@ impl Tracker {
 
     /// Progress with `in_job` texels of the current strip done; the slice
     /// they reach becomes the current one.
+    /// Planning is over (it began at `start`): the forecast of `total`
+    /// core-seconds and `samples`, from "pilots" or "probes", is the ETA's.
+    fn forecast(&mut self, from: &'static str, start: Instant, total: f64, samples: u64) {
+        let planning_s = start.elapsed().as_secs_f64();
+        self.prep_s += planning_s;
+        self.planning = false;
+        self.forecast_total = Some(total);
+        self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * self.cores as f64 });
+    }
+
     fn progress(&mut self, in_job: u64, stalled: Option<String>) -> BakeProgress {
         let elapsed_s = self.start.elapsed().as_secs_f64();
         let texels_done = (self.texels_before + in_job).min(self.texels_total);
@@ -430,12 +440,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 samples += planned;
             }
         }
-        let planning_core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
-        let mut t = tracker.lock().unwrap();
-        t.prep_s += start.elapsed().as_secs_f64();
-        t.planning = false;
-        t.forecast_total = Some(total);
-        t.emit(BakeEvent::Forecast { from: "pilots", core_seconds: total, samples, planning_core_seconds });
+        tracker.lock().unwrap().forecast("pilots", start, total, samples);
     } else if plan.iter().map(|p| p.views.iter().flatten().count()).sum::<usize>() >= MIN_SLICES_TO_PROBE {
         // A fixed sample count (a draft): every texel takes the same
         // samples, but a texel's cost differs from sky to sky (a cloudy
@@ -487,12 +492,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 samples += texels as u64 * view.spp as u64;
             }
         }
-        let planning_core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
-        let mut t = tracker.lock().unwrap();
-        t.prep_s += start.elapsed().as_secs_f64();
-        t.planning = false;
-        t.forecast_total = Some(total);
-        t.emit(BakeEvent::Forecast { from: "probes", core_seconds: total, samples, planning_core_seconds });
+        tracker.lock().unwrap().forecast("probes", start, total, samples);
     }
     let mut done = Vec::new();
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
