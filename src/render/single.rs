@@ -347,9 +347,11 @@ mod tests {
     /// from the ground and from 1 km, rays level, 5° and 30° up and 3° and
     /// 30° down, to 0.5, 5, 40 and 300 km; the optical depths agree to
     /// 0.2 % of their value plus 1e-3 of the two columns differenced (the
-    /// table's own accuracy: its columns along a level ray are 7 to 49
-    /// long, so a level ray from the ground is a weak check, 5 % of a 5 km
-    /// ray's depth; every other ray is held to its 0.2 %). The distance ends at the ground and
+    /// table's own accuracy). That second term dominates for short rays
+    /// near the horizon, whose columns to space are long (7 to 49 along a
+    /// level ray): those are weak checks (a level 5 km ray from the ground
+    /// passes 5 % apart); long and steep rays are held near 0.2 %. The
+    /// distance ends at the ground and
     /// at the top (a ray 30° down from 1 km meets the ground after 2 km),
     /// and under a 1 km ceiling a ray 30° up from the ground is attenuated
     /// by its first 2 km alone (its stretch below 1 km; this failed by
