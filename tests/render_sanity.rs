@@ -144,6 +144,7 @@ fn renders_are_deterministic_across_threads_and_splits() {
             sun_disk: true,
             max_rel_error: None,
             single_scatter: SingleScatter::default(),
+            fog: None,
         },
     };
     let cache = MieCache::new(None);
@@ -209,6 +210,7 @@ fn adaptive_sampling_meets_its_target() {
             sun_disk: true,
             max_rel_error: Some(target),
             single_scatter: SingleScatter::default(),
+            fog: None,
         },
     };
     let cache = MieCache::new(None);

@@ -140,6 +140,7 @@ fn view(sky: &BasisSky, sun_zenith_deg: f64, stride: usize, spp: u32, seed: u64,
         sun_disk: false,
         max_rel_error: None,
         single_scatter: method,
+        fog: None,
     }
 }
 

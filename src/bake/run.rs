@@ -125,6 +125,7 @@ pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, to
         // The disk belongs in the sunlight LUT, not in a texture that tops out at 65024.
         sun_disk: false,
         single_scatter: SingleScatter::default(),
+        fog: None,
         max_rel_error: s.max_rel_error,
     }
 }

@@ -199,6 +199,7 @@ pub fn verify(
                 estimator: Estimator::Full,
                 sun_disk: false,
                 single_scatter: SingleScatter::default(),
+                fog: None,
                 max_rel_error: None,
             };
             let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
@@ -405,6 +406,7 @@ pub fn reference_twilight_step(
             estimator: Estimator::Full,
             sun_disk: false,
             single_scatter: SingleScatter::default(),
+            fog: None,
             max_rel_error: None,
         };
         let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;

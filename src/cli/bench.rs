@@ -196,6 +196,7 @@ fn sunset_settings(spp: u32, seed: u64) -> Settings {
             sun_disk: true,
             max_rel_error: None,
             single_scatter: SingleScatter::default(),
+            fog: None,
         },
     }
 }

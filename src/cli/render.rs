@@ -10,6 +10,7 @@ use sky::farm::coordinator::{FarmError, Options, WorkerSpec};
 use sky::farm::journal;
 use sky::mie::MieCache;
 use sky::render::camera::Camera;
+use sky::render::fog::Fog;
 use sky::render::tracer::Estimator;
 use sky::render::{self, output, Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
 use sky::session::{OpticsCache, Session};
@@ -136,6 +137,15 @@ pub struct RenderArgs {
     /// How sunlight scattered once is estimated: by deterministic quadrature along each pixel's ray (no noise; the lut and directions cameras, whose pixels are single directions) or by the path tracer (always for the jittered cameras)
     #[arg(long, value_enum, default_value = "quadrature")]
     single_scatter: SingleArg,
+    /// Render the talk's global fog instead of the sky: the light the air scatters toward the camera in front of a black object at this distance (`inf`: none; the ground, where a ray meets it first, is black too); the sun's disk is never seen
+    #[arg(long, value_name = "KM")]
+    fog_distance_km: Option<f64>,
+    /// With --fog-distance-km: only the air below this altitude (the cloud base) scatters toward the camera
+    #[arg(long, value_name = "KM", requires = "fog_distance_km")]
+    fog_ceiling_km: Option<f64>,
+    /// With --fog-distance-km: the Shadowed Fog, without the sunlight scattered once toward the camera
+    #[arg(long, requires = "fog_distance_km")]
+    shadowed_fog: bool,
     #[command(flatten)]
     farm: super::farm_args::FarmArgs,
     /// Render this fraction of the columns a second time on another worker and compare bit for bit
@@ -277,8 +287,12 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 SingleArg::Quadrature => SingleScatter::Quadrature,
                 SingleArg::MonteCarlo => SingleScatter::MonteCarlo,
             },
+            fog: a.fog_distance_km.map(|d| Fog { max_distance_km: d, ceiling_km: a.fog_ceiling_km, shadowed: a.shadowed_fog }),
         },
     };
+    if let (Some(_), Err(e)) = (settings.view.fog, settings.view.check()) {
+        return usage(e);
+    }
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let c = cancel.clone();

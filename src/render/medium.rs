@@ -484,12 +484,20 @@ impl ColumnTable {
     /// Optical depth of a path made of table columns, Σ added − Σ
     /// subtracted, never negative (see [`ColumnPath`]).
     pub fn path_optical_depth(&self, path: &ColumnPath, e: &[f64]) -> f64 {
-        let add: f64 = path.add[..path.n_add].iter().map(|n| self.optical_depth_at(n, e)).sum();
-        let sub: f64 = path.sub[..path.n_sub].iter().map(|n| self.optical_depth_at(n, e)).sum();
+        let (add, sub) = self.path_columns(path, e);
         if add.is_infinite() {
             return f64::INFINITY;
         }
         (add - sub).max(0.0)
+    }
+
+    /// The optical depths Σ added and Σ subtracted of a path: their sum
+    /// bounds the interpolation error of the difference (see
+    /// `Kernel::transmittance`).
+    pub fn path_columns(&self, path: &ColumnPath, e: &[f64]) -> (f64, f64) {
+        let add: f64 = path.add[..path.n_add].iter().map(|n| self.optical_depth_at(n, e)).sum();
+        let sub: f64 = path.sub[..path.n_sub].iter().map(|n| self.optical_depth_at(n, e)).sum();
+        (add, sub)
     }
 }
 

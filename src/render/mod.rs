@@ -19,6 +19,7 @@ pub mod camera;
 #[cfg(test)]
 mod chi2;
 pub mod denoise;
+pub mod fog;
 pub mod guide;
 pub mod hero;
 pub mod kernel;
@@ -36,6 +37,7 @@ use crate::mie::MieCache;
 pub use adaptive::{adaptive_samples, Moments, ADAPTIVE_MIN_SPP, ADAPTIVE_PILOT_SPP};
 pub use bands::{Bands, HeroSet, HERO_N};
 use camera::Camera;
+use fog::Fog;
 use glam::DVec3;
 use kernel::{Kernel, Scratch};
 use medium::{ColumnTable, Medium, Spectral};
@@ -111,6 +113,10 @@ pub struct View {
     /// How single scattering is estimated (see [`SingleScatter`]).
     #[serde(default)]
     pub single_scatter: SingleScatter,
+    /// Global fog in front of an object instead of the sky (see `fog`);
+    /// the sun's disk is then never seen.
+    #[serde(default)]
+    pub fog: Option<Fog>,
 }
 
 impl View {
@@ -155,6 +161,12 @@ impl View {
             if mappings.is_empty() || !self.width.is_multiple_of(mappings.len()) {
                 return Err(format!("a strip of {} LUT slices cannot be {} columns wide", mappings.len(), self.width));
             }
+        }
+        if let Some(fog) = &self.fog {
+            if self.estimator == Estimator::Naive {
+                return Err("the naive estimator cannot render fog".into());
+            }
+            fog.check(self.altitude_m / 1000.0)?;
         }
         Ok(())
     }
@@ -205,6 +217,7 @@ impl Settings {
                 sun_disk,
                 max_rel_error: None,
                 single_scatter: SingleScatter::default(),
+                fog: None,
             },
         }
     }
@@ -320,9 +333,16 @@ pub struct PixelTracers<'a> {
 impl<'a> PixelTracers<'a> {
     pub fn new(scene: &'a Scene, s: &View) -> PixelTracers<'a> {
         let sun = s.sun_direction();
-        let quadrature = s.single_by_quadrature();
-        let make =
-            |o: &'a Spectral| Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator).with_sun_disk(s.sun_disk).with_columns(&scene.columns).with_single_skipped(quadrature);
+        // The first vertex leaves single scattering to the quadrature, or
+        // out altogether for a Shadowed Fog.
+        let skip_single = s.single_by_quadrature() || s.fog.is_some_and(|f| f.shadowed);
+        let make = |o: &'a Spectral| {
+            Tracer::new(&scene.medium, o, sun, scene.sun_angular_diameter_deg, s.estimator)
+                .with_sun_disk(s.sun_disk && s.fog.is_none())
+                .with_columns(&scene.columns)
+                .with_single_skipped(skip_single)
+                .with_fog(s.fog)
+        };
         let band: Vec<Tracer> = scene.band_optics.iter().map(make).collect();
         let line: Vec<Tracer> = scene.line_optics.iter().map(make).collect();
         let origin = band.first().or(line.first()).map(|t| t.observer(s.altitude_m / 1000.0));
@@ -378,11 +398,17 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
     // every sample of the pixel, so it is added to each, and the moments
     // measure the noise of the rest.
     let (single_xyz, single_lines) = match centre {
-        Some(c) if s.single_by_quadrature() => {
+        Some(c) if s.single_by_quadrature() && !s.fog.is_some_and(|f| f.shadowed) => {
             let (sun, alt_km) = (s.sun_direction(), s.altitude_m / 1000.0);
-            let xyz = if scene.spectral.xyz { single::SingleScattering::bands(scene, sun, alt_km).xyz(&scene.bands.weight, c) } else { [0.0; 3] };
-            let lines = if nl > 0 { single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km).radiance(c) } else { Vec::new() };
-            (xyz, lines)
+            let (bands, lines) = (single::SingleScattering::bands(scene, sun, alt_km), single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km));
+            let w = &scene.bands.weight;
+            match s.fog {
+                Some(f) => (
+                    if scene.spectral.xyz { bands.fog_xyz(w, c, f.max_distance_km, f.ceiling_km) } else { [0.0; 3] },
+                    if nl > 0 { lines.radiance_to(c, f.max_distance_km, f.ceiling_km) } else { Vec::new() },
+                ),
+                None => (if scene.spectral.xyz { bands.xyz(w, c) } else { [0.0; 3] }, if nl > 0 { lines.radiance(c) } else { Vec::new() }),
+            }
         }
         _ => ([0.0; 3], vec![0.0; nl]),
     };

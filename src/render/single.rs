@@ -110,19 +110,20 @@ impl<'a> SingleScattering<'a> {
     /// the observer), for each optics: W m⁻² sr⁻¹ nm⁻¹ times the optics'
     /// `sun_irradiance` units (sr⁻¹ for per-unit-irradiance bands).
     pub fn radiance(&self, dir: DVec3) -> Vec<f64> {
-        self.radiance_to(dir, f64::INFINITY, None)
+        self.march(dir, f64::INFINITY, None, true).radiance
     }
 
     /// [`radiance`](Self::radiance) of the air within `max_distance_km` of
     /// the observer, in front of an opaque black object at that distance
-    /// (the ground counts only if the ray meets it first), and, with a
-    /// `ceiling_km`, of the air below that altitude only (scattering and
-    /// extinction along the view; the sunlight still comes through all of
-    /// the atmosphere): the single-scattered part of the talk's global fog
-    /// in front of a mountain ("only low-altitude atmosphere affects our
-    /// global fog").
+    /// or at the ground, whichever the ray meets first (the engine draws
+    /// the object and the terrain; the fog only adds in front of them),
+    /// and, with a `ceiling_km`, of the air below that altitude only
+    /// (scattering and extinction along the view; the sunlight still comes
+    /// through all of the atmosphere): the single-scattered part of the
+    /// talk's global fog in front of a mountain ("only low-altitude
+    /// atmosphere affects our global fog"; see `render::fog`).
     pub fn radiance_to(&self, dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>) -> Vec<f64> {
-        self.march(dir, max_distance_km, ceiling_km).radiance
+        self.march(dir, max_distance_km, ceiling_km, false).radiance
     }
 
     /// The transmittance of the air along the view ray from the observer
@@ -133,11 +134,13 @@ impl<'a> SingleScattering<'a> {
     /// [`radiance_to`](Self::radiance_to) (it is accumulated along the same
     /// steps); below e^−40 it is reported as 0.
     pub fn transmittance_to(&self, dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>) -> Vec<f64> {
-        self.march(dir, max_distance_km, ceiling_km).transmittance
+        self.march(dir, max_distance_km, ceiling_km, false).transmittance
     }
 
-    /// The quadrature behind `radiance_to` and `transmittance_to`.
-    fn march(&self, dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>) -> March {
+    /// The quadrature behind `radiance`, `radiance_to` and
+    /// `transmittance_to`; the ground where the ray ends reflects sunlight
+    /// only if `lit_ground`.
+    fn march(&self, dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>, lit_ground: bool) -> March {
         let m = self.medium;
         let d = dir.normalize();
         let n = self.optics.len();
@@ -212,7 +215,7 @@ impl<'a> SingleScattering<'a> {
                 return March { radiance: out, transmittance: vec![0.0; n] };
             }
         }
-        if let Some(t_g) = ground {
+        if let Some(t_g) = ground.filter(|_| lit_ground) {
             let g = self.origin + d * t_g;
             let cos_sun = m.up(g).dot(self.sun);
             if cos_sun > 0.0 {
@@ -228,15 +231,25 @@ impl<'a> SingleScattering<'a> {
     /// CIE XYZ of [`radiance`](Self::radiance) over the scene's bands,
     /// weighted as the renderer weights them (Y in cd m⁻²).
     pub fn xyz(&self, weight: &[[f64; 3]], dir: DVec3) -> [f64; 3] {
-        let l = self.radiance(dir);
-        let mut xyz = [0.0; 3];
-        for (lb, w) in l.iter().zip(weight) {
-            for c in 0..3 {
-                xyz[c] += w[c] * lb;
-            }
-        }
-        xyz
+        xyz_of(weight, &self.radiance(dir))
     }
+
+    /// CIE XYZ of [`radiance_to`](Self::radiance_to): the single-scattered
+    /// part of a global fog.
+    pub fn fog_xyz(&self, weight: &[[f64; 3]], dir: DVec3, max_distance_km: f64, ceiling_km: Option<f64>) -> [f64; 3] {
+        xyz_of(weight, &self.radiance_to(dir, max_distance_km, ceiling_km))
+    }
+}
+
+/// XYZ of per-band radiances with the bands' weights.
+fn xyz_of(weight: &[[f64; 3]], l: &[f64]) -> [f64; 3] {
+    let mut xyz = [0.0; 3];
+    for (lb, w) in l.iter().zip(weight) {
+        for c in 0..3 {
+            xyz[c] += w[c] * lb;
+        }
+    }
+    xyz
 }
 
 #[cfg(test)]

@@ -9,6 +9,7 @@
 //! radiance per unit solar irradiance, sr⁻¹). Transcendental functions come
 //! from `libm` (pure Rust), so the kernel rounds the same on every platform.
 
+use super::fog::Fog;
 use super::guide::RayGuide;
 use super::kernel::{Kernel, Scratch};
 use super::medium::{ColumnPath, ColumnTable, Medium, Spectral};
@@ -97,6 +98,10 @@ pub struct Tracer<'a> {
     /// toward the sun, and paths estimate only light scattered twice or
     /// more.
     pub skip_single: bool,
+    /// Global fog instead of the sky (see `fog`): the camera ray's first
+    /// collision only within the fog's reach, the object and the ground
+    /// at its end black.
+    pub fog: Option<Fog>,
 }
 
 /// Probability of drawing a scattered direction from the sun lobe, when the
@@ -130,6 +135,7 @@ impl<'a> Tracer<'a> {
             lobe,
             skylight: estimator == Estimator::Full,
             skip_single: false,
+            fog: None,
         }
     }
 
@@ -258,6 +264,12 @@ impl<'a> Tracer<'a> {
     /// See [`Tracer::skip_single`].
     pub fn with_single_skipped(mut self, skip: bool) -> Self {
         self.skip_single = skip;
+        self
+    }
+
+    /// See [`Tracer::fog`].
+    pub fn with_fog(mut self, fog: Option<Fog>) -> Self {
+        self.fog = fog;
         self
     }
 
