@@ -10,6 +10,7 @@ pub mod colour_error;
 pub mod dds;
 pub mod decode;
 pub mod error_map;
+pub mod fog;
 pub mod interpolation;
 pub mod ktx2;
 pub mod manifest;

@@ -146,7 +146,7 @@ pub fn channel_ratio(value: [f64; 3], top: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|c| if top[c] > 0.0 { value[c] / top[c] } else { 0.0 })
 }
 
-fn mul(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
+pub(crate) fn mul(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
 }
 
