@@ -28,6 +28,11 @@ pub enum LutCommand {
         after_help = "Example:\n  sky lut interpolation atmospheres/clear.toml --size 32x128\n\nBakes the single-scattering sky (no noise) in memory through the LUT mappings and decodes it with the reference decoder: direction interpolation at every slice from 60 deg sun zenith to the horizon in both direction mappings, slice interpolation between slices, and the twilight's largest step."
     )]
     Interpolation(super::lut_interpolation::InterpolationArgs),
+    /// The talk's global-fog depth falloff fitted to reference fog renders of an atmosphere: a and p, the fit's error against the depth-free LUT's, a plot
+    #[command(
+        after_help = "Example:\n  sky lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot out/fog\n\nRenders the fog (the light the air below the ceiling scatters toward the camera in front of a black object) toward 7 elevations x 3 azimuths at 8 depths from 0.002 to 1 of the distance to the ceiling, for each sun, and fits Fog(x) = LUT (1 - exp(-a theta^p x)) / (1 - exp(-a theta^p)) in relative error."
+    )]
+    FogFalloff(super::lut_fog::FogFalloffArgs),
 }
 
 #[derive(Args, Debug)]
@@ -195,6 +200,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
         }
         LutCommand::Verify(a) => verify(a),
         LutCommand::Interpolation(a) => super::lut_interpolation::run(a),
+        LutCommand::FogFalloff(a) => super::lut_fog::run(a),
         LutCommand::Decode(a) => {
             check(&a.conditions)?;
             if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {

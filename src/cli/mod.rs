@@ -19,6 +19,7 @@ mod bench;
 mod bench_bake;
 mod farm_args;
 mod lut;
+mod lut_fog;
 mod lut_interpolation;
 mod mie;
 mod progress;

@@ -11,6 +11,7 @@ pub mod dds;
 pub mod decode;
 pub mod error_map;
 pub mod fog;
+pub mod fog_falloff;
 pub mod interpolation;
 pub mod ktx2;
 pub mod manifest;
