@@ -58,8 +58,9 @@ demo: build
 	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --directions 200 --spp 64 --plot $(OUT)/luts/verify
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --camera fisheye --size 256x256 --out $(OUT)/decoded.exr --png $(OUT)/decoded.png
 	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 60,180
+	$(SKY) lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot $(OUT)/fog
 	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png;"
-	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png"
+	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png; the fitted fog falloff in $(OUT)/fog/falloff.png"
 
 # Benchmarks reported in the README.
 bench: build
