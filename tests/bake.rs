@@ -70,12 +70,12 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     let d = sky::render::camera::direction_deg(50.0, 120.0);
     let y = luts.sample_xyz(30.0, 0.0, 0.5, 0.0, d)[1];
     assert!(y > 0.0 && y.is_finite(), "{y}");
-    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
 
     // Nothing changed: nothing is rendered, and the files are the same bytes.
     let second = summary(&sky(&args, tmp.path()));
     assert_eq!(rendered(&second), [("clear".to_string(), 0, 64), ("hazed".to_string(), 0, 64)]);
-    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
     assert!(before == after, "a re-run from the cache changed the files");
 
     // The decoder on the command line.
@@ -96,6 +96,78 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     let o = sky(&["lut", "sample", m.to_str().unwrap(), "--sun-elevation-deg", "30", "--haziness", "0.5", "--direction", "50,120", "--json"], tmp.path());
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!((v["xyz"][1].as_f64().unwrap() / y - 1.0).abs() < 1e-12);
+}
+
+/// The global-fog LUTs of a bake (issue 13), read back by the reference
+/// decoder: fog.ktx2 holds every sky's Fog and Shadowed Fog slices and
+/// attenuation.ktx2 a layer per sky (vkFormat 97, the bake file's 8 x 8);
+/// at a slice's own sun and a texel's own direction, at full depth, the
+/// decoded fog is the rendered slice's texel (the same view rendered here
+/// again: renders are deterministic) to RGBA16F rounding (2^-11), sunlit
+/// (cloud occlusion 0) and shadowed (1); the decoded attenuation is the
+/// table computed here from the same optics; in front of nearer objects
+/// the fog is fainter and the object less attenuated; `sky lut sample
+/// --depth-m` prints it.
+#[test]
+fn a_bake_carries_the_fog_luts() {
+    use sky::lut::fog::{attenuation_texel, fog_texel_view, AttenuationTable, ATTENUATION_SIZE};
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("luts");
+    let bake_path = root().join("tests/bakes/tiny.toml");
+    summary(&sky(&["bake-luts", bake_path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
+    let f = luts.manifest.fog.as_ref().expect("a fog entry");
+    assert_eq!((f.vk_format, f.width, f.height, f.layers, f.ceiling_km), (97, 8, 8, 2 * 2 * 64, 3.0));
+    assert_eq!((f.attenuation.vk_format, f.attenuation.width, f.attenuation.layers.len()), (97, 64, 2));
+    let fs = &f.skies[0];
+    assert_eq!((fs.name.as_str(), fs.first_layer, fs.slices), ("clear", 0, 64));
+    assert!(fs.falloff_error_median < fs.depth_free_error_median, "{fs:?}");
+
+    let bake = sky::bake::BakeFile::load(&bake_path).unwrap();
+    let basis = &bake.skies[0];
+    let atm = sky::atmosphere::Atmosphere::load(&basis.atmosphere).unwrap();
+    let spectral = sky::bake::run::spectral_settings(&basis.draft);
+    let scene = sky::render::Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
+    let m = luts.manifest.colour.rgb_from_xyz;
+    let cancel = std::sync::atomic::AtomicBool::new(false);
+    for index in [5, 30, 46] {
+        for shadowed in [false, true] {
+            let view = sky::bake::fog::fog_view(basis, &bake.fog, &basis.draft, index, atm.planet.radius_km, atm.planet.top_km, shadowed);
+            let image = sky::render::render(&scene, &view, &cancel, &|| {}).unwrap();
+            let elevation_sun = 90.0 - view.sun_zenith_deg;
+            // Not the top row: at the zenith every u is the same direction, each
+            // texel with its own noise, and the azimuth a decoder finds is arbitrary.
+            for (i, j) in [(0, 0), (3, 2), (7, 5), (5, 6)] {
+                let (elevation, azimuth) = fog_texel_view(i, j, 8, 8);
+                let d = sky::render::camera::direction_deg(90.0 - elevation, azimuth);
+                let want = sky::lut::decode::mat_mul(&m, image.pixels[j * 8 + i].xyz).map(|x| x.max(0.0));
+                let got = luts.fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, if shadowed { 1.0 } else { 0.0 }).unwrap().inscatter_rgb;
+                for c in 0..3 {
+                    assert!((got[c] - want[c]).abs() <= 1e-3 * want[c] + 1e-6 * want[1], "slice {index}, shadowed {shadowed}, texel ({i}, {j}), channel {c}: decoded {got:?}, rendered {want:?}");
+                }
+            }
+        }
+    }
+    let geometry = sky::lut::decode_fog::geometry_of(fs, f.ceiling_km);
+    let table = AttenuationTable::compute(&scene, geometry).channel_texels(&m);
+    for (i, j) in [(0, 0), (10, 3), (40, 20), (63, 63)] {
+        let (depth, elevation) = attenuation_texel(&geometry, i, j);
+        let d = sky::render::camera::direction_deg(90.0 - elevation, 30.0);
+        let got = luts.fog(20.0, 0.0, 0.0, 0.0, d, depth, 0.0).unwrap().attenuation_rgb;
+        let want = table[j * ATTENUATION_SIZE + i];
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() <= 1e-3 * want[c] + 1e-6, "attenuation texel ({i}, {j}): decoded {got:?}, computed {want:?}");
+        }
+    }
+    let d = sky::render::camera::direction_deg(85.0, 90.0);
+    let (near, far) = (luts.fog(20.0, 0.0, 0.0, 0.0, d, 1.0, 0.0).unwrap(), luts.fog(20.0, 0.0, 0.0, 0.0, d, 10.0, 0.0).unwrap());
+    assert!(near.inscatter_rgb[1] < far.inscatter_rgb[1] && near.attenuation_rgb[1] > far.attenuation_rgb[1], "{near:?} {far:?}");
+    let m_path = out.join("manifest.json");
+    let o = sky(&["lut", "sample", m_path.to_str().unwrap(), "--sun-elevation-deg", "20", "--direction", "85,90", "--depth-m", "10000", "--json"], tmp.path());
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert!((v["fog"]["inscatter_rgb"][1].as_f64().unwrap() / far.inscatter_rgb[1] - 1.0).abs() < 1e-12, "{v}");
+    let o = sky(&["lut", "sample", m_path.to_str().unwrap(), "--sun-elevation-deg", "20", "--direction", "85,90", "--depth-m", "100", "--cloud-occlusion", "2"], tmp.path());
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
 /// A draft (fixed samples) forecasts its cost from probes before the first
@@ -422,6 +494,14 @@ fn lut_verify_reports_every_elevation() {
         }
         let q = s["quantisation_p99_rel"].as_f64().unwrap();
         assert!(q > 0.0 && q <= 1.0 / 64.0, "{q}");
+        // The fog: every depth, view and sun between slices compared (3
+        // suns x 5 depths x 15 views, fewer where a reference is black),
+        // and the attenuation to the quadrature's within its texels'
+        // interpolation (exact transmittances: no noise).
+        let fog = &s["fog"];
+        assert!(fog["fog"]["count"].as_u64().unwrap() > 150 && fog["shadowed"]["count"].as_u64().unwrap() > 150, "{fog}");
+        assert!(fog["fog"]["median"].as_f64().is_some_and(f64::is_finite), "{fog}");
+        assert!(fog["attenuation"]["median"].as_f64().unwrap() < 0.01, "{fog}");
     }
     assert!(plots.join("twilight_clear.png").exists());
 }

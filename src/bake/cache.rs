@@ -112,6 +112,29 @@ impl SliceCache {
 }
 
 const LIGHTING_MAGIC: &[u8; 8] = b"SKYLGT01";
+const VALUE_MAGIC: &[u8; 8] = b"SKYVAL01";
+
+impl SliceCache {
+    fn value_path(&self, key: &str, kind: &str) -> PathBuf {
+        self.dir.join(format!("{key}.{kind}"))
+    }
+
+    /// A value of some other kind (`kind` names the file's extension: a
+    /// sky's fog falloff and Attenuation table, `bake::fog`), if the cache
+    /// holds a readable one.
+    pub fn get_value<T: serde::de::DeserializeOwned>(&self, key: &str, kind: &str) -> Option<T> {
+        let bytes = std::fs::read(self.value_path(key, kind)).ok()?;
+        postcard::from_bytes(bytes.strip_prefix(VALUE_MAGIC.as_slice())?).ok()
+    }
+
+    /// Stores a value under `key` (temporary file, rename).
+    pub fn put_value<T: serde::Serialize>(&self, key: &str, kind: &str, value: &T) -> Result<(), CacheError> {
+        let path = self.value_path(key, kind);
+        let mut bytes = VALUE_MAGIC.to_vec();
+        bytes.extend(postcard::to_allocvec(value).expect("cached values always encode"));
+        crate::mie::cache::write_atomic(&path, &bytes).map_err(|source| CacheError { path, source })
+    }
+}
 
 #[cfg(test)]
 mod tests {

@@ -22,6 +22,11 @@
 //! threshold_deg = 87.9       # sun zenith beyond which slices are latitude-longitude
 //!                            # (default: mapping::default_threshold_deg; measure it
 //!                            # with `sky lut interpolation ATMOSPHERE --size WxH`)
+//!
+//! [fog]                      # the global-fog LUTs of every basis sky (optional)
+//! ceiling_km = 3.0           # only the air below makes fog: the cloud base
+//! width = 32                 # Fog LUT texels along u (azimuth from the sun)
+//! height = 32                # along v (elevation)
 //! ```
 
 use crate::atmosphere::Located;
@@ -90,11 +95,35 @@ impl BasisSky {
     }
 }
 
+/// The global-fog LUTs of a bake (`lut::fog`): one ceiling and one size
+/// for every basis sky.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct FogSettings {
+    /// Only the air below this altitude makes fog (the talk: "only
+    /// low-altitude atmosphere affects our global fog"), km.
+    pub ceiling_km: f64,
+    /// Fog LUT texels along u (azimuth from the sun) and v (elevation).
+    pub width: usize,
+    pub height: usize,
+}
+
+/// The ceiling of the fog by default: the base of the cloud layer of the
+/// shipped cloudy skies (`atmospheres/cloudy*.toml`: 3 to 5 km).
+pub const DEFAULT_FOG_CEILING_KM: f64 = 3.0;
+
+impl Default for FogSettings {
+    /// The talk's 32 × 32 under the cloudy skies' cloud base.
+    fn default() -> FogSettings {
+        FogSettings { ceiling_km: DEFAULT_FOG_CEILING_KM, width: crate::lut::fog::FOG_WIDTH, height: crate::lut::fog::FOG_HEIGHT }
+    }
+}
+
 /// A parsed bake file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct BakeFile {
     pub path: PathBuf,
     pub skies: Vec<BasisSky>,
+    pub fog: FogSettings,
 }
 
 /// Every error found in a bake file.
@@ -111,6 +140,15 @@ struct RawFile {
     quality: BTreeMap<String, S<RawSampling>>,
     #[serde(default)]
     sky: Vec<S<RawSky>>,
+    fog: Option<S<RawFog>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawFog {
+    ceiling_km: Option<S<f64>>,
+    width: Option<S<i64>>,
+    height: Option<S<i64>>,
 }
 
 #[derive(Deserialize, Clone, Default)]
@@ -292,8 +330,27 @@ impl BakeFile {
             let line = ctx.line(s.span().start);
             skies.push(BasisSky { name, atmosphere, width, height, slices, altitude_m, threshold_deg, line, draft, final_ });
         }
+        let mut fog = FogSettings::default();
+        if let Some(f) = &raw.fog {
+            let f = f.get_ref();
+            if let Some(c) = &f.ceiling_km {
+                let highest = skies.iter().map(|s| s.altitude_m / 1000.0).fold(0.0, f64::max);
+                if c.get_ref().is_finite() && *c.get_ref() > highest && *c.get_ref() <= 20.0 {
+                    fog.ceiling_km = *c.get_ref();
+                } else {
+                    ctx.err(c, format!("fog.ceiling_km: must be above every sky's observer ({highest} km) and at most 20 km, got {}", c.get_ref()));
+                }
+            }
+            for (raw, key, out) in [(&f.width, "width", &mut fog.width), (&f.height, "height", &mut fog.height)] {
+                let Some(v) = raw else { continue };
+                match usize::try_from(*v.get_ref()) {
+                    Ok(n) if (2..=1024).contains(&n) => *out = n,
+                    _ => ctx.err(v, format!("fog.{key}: must be from 2 to 1024 texels, got {}", v.get_ref())),
+                }
+            }
+        }
         if ctx.errors.is_empty() {
-            Ok(BakeFile { path: path.to_path_buf(), skies })
+            Ok(BakeFile { path: path.to_path_buf(), skies, fog })
         } else {
             Err(BakeFileError { errors: ctx.errors })
         }
@@ -317,6 +374,9 @@ mod tests {
         assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
         assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None });
         assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02) });
+        assert_eq!(b.fog, FogSettings { ceiling_km: 3.0, width: 32, height: 32 });
+        let b = parse("[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[fog]\nceiling_km = 2.5\nwidth = 8\nheight = 4\n").unwrap();
+        assert_eq!(b.fog, FogSettings { ceiling_km: 2.5, width: 8, height: 4 });
     }
 
     #[test]
@@ -337,6 +397,11 @@ mod tests {
         assert!(twice.to_string().contains("test-bake.toml:7: sky \"a\" appears twice"), "{twice}");
         let threshold = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\nthreshold_deg = 95.0\n").unwrap_err();
         assert!(threshold.to_string().contains("test-bake.toml:6: sky \"a\": threshold_deg must be"), "{threshold}");
+        let fog = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\naltitude_m = 500.0\n[fog]\nceiling_km = 0.2\nheight = 0\nshape = 1\n").unwrap_err();
+        assert!(fog.to_string().contains("test-bake.toml:10: unknown field `shape`"), "{fog}");
+        let fog = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\naltitude_m = 500.0\n[fog]\nceiling_km = 0.2\nheight = 0\n").unwrap_err();
+        assert!(fog.to_string().contains("test-bake.toml:8: fog.ceiling_km: must be above every sky's observer (0.5 km)"), "{fog}");
+        assert!(fog.to_string().contains("test-bake.toml:9: fog.height: must be from 2"), "{fog}");
         let b =
             parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\nthreshold_deg = 85.3\n[[sky]]\nname = \"b\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n")
                 .unwrap();

@@ -7,11 +7,14 @@
 pub mod bench;
 pub mod cache;
 pub mod file;
+pub mod fog;
 pub mod lighting;
 pub mod openjd;
 pub mod pack;
+pub mod pack_fog;
 pub mod run;
 pub mod verify;
+pub mod verify_fog;
 
 pub use cache::{RenderedSlice, SliceCache};
 pub use file::{BakeFile, BakeFileError, BasisSky, Quality, Sampling};
@@ -39,6 +42,11 @@ pub enum BakeEvent {
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
     /// Every slice of a basis sky is done.
     SkyDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64 },
+    /// A slice of a basis sky's Fog or Shadowed Fog LUT is done (`done`
+    /// of `total`, both LUTs counted).
+    FogSlice { sky: String, done: usize, total: usize },
+    /// Every fog slice of a basis sky is done, with the falloff's fit.
+    FogDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64, falloff_a: f64, falloff_p: f64, fit_median: f64, fit_p99: f64 },
     /// Periodic progress over the whole bake.
     Progress(BakeProgress),
     /// A farm event of the slice being rendered (worker quarantined, task

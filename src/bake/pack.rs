@@ -250,6 +250,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         weather: manifest::weather(),
         skies,
         transmittance: None,
+        fog: None,
     }
 }
 
@@ -259,6 +260,7 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
     // Every sky packed before any file is written: a texel that is not
     // finite leaves no file behind.
     let mut packed = skies.iter().map(|s| pack_sky(s, colour)).collect::<Result<Vec<_>, _>>()?;
+    let fog = super::pack_fog::pack_fog(skies, colour)?;
     std::fs::create_dir_all(dir).map_err(|e| BakeError::Write(format!("{}: {e}", dir.display())))?;
     let mut entries = Vec::new();
     let mut stats = Vec::new();
@@ -272,6 +274,10 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
     let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
     let mut m = manifest(quality, colour, entries);
     m.transmittance = transmittance;
+    m.fog = match fog {
+        Some(f) => Some(f.write(colour, dir)?),
+        None => None,
+    };
     let text = compact_number_arrays(&serde_json::to_string_pretty(&m).expect("a manifest always serialises"));
     let path = dir.join("manifest.json");
     crate::lut::atomic::write_atomically(&path, text.as_bytes()).map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;

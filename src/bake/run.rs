@@ -102,6 +102,8 @@ pub struct SkySlices {
     /// Columns of this sky's strip taken from the journal of a bake that
     /// was stopped (the rest of the strip was rendered now).
     pub columns_resumed: u32,
+    /// The sky's global-fog LUTs (None with `only`, like `lighting`).
+    pub fog: Option<super::fog::SkyFog>,
 }
 
 /// The spectral settings of a preset: hero-wavelength sampling, XYZ only.
@@ -358,6 +360,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             cached,
             columns_resumed: 0,
             lighting: None,
+            fog: None,
         };
         plan.push(Planned { atm, bundle, out, views, same_as });
     }
@@ -586,6 +589,24 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 }
             };
         }
+        if opts.only.is_none() {
+            // The global-fog LUTs, on this process's threads.
+            let scene = optics.get(&atms[k], &out.spectral, mie, &|| {});
+            let job = super::fog::FogJob { sky: &out.sky, atmosphere: &atms[k], scene: &scene, sampling: &out.sampling, settings: bake.fog, quality: opts.quality };
+            let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
+            let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &on_slice)?;
+            tracker.lock().unwrap().emit(BakeEvent::FogDone {
+                sky: name.clone(),
+                slices_rendered: fog.rendered,
+                slices_cached: fog.cached,
+                core_seconds: fog.core_seconds,
+                falloff_a: fog.extras.falloff.a,
+                falloff_p: fog.extras.falloff.p,
+                fit_median: fog.extras.fit_error.median,
+                fit_p99: fog.extras.fit_error.p99,
+            });
+            out.fog = Some(fog);
+        }
         if out.slices.iter().any(Option::is_some) {
             tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });
         }
@@ -647,6 +668,11 @@ fn render_strip(session: &Session, strip: &View, cache: &SliceCache, sky: &str, 
 
 /// Slice `index` of `sky`, the columns of `image` from `x0` on; a texel
 /// that is not finite is an error naming it.
+/// A whole image as one slice (see `slice_of_strip`).
+pub(crate) fn slice_of_image(image: &Image, view: &View, sky: &str, index: usize, core_seconds: f64) -> Result<RenderedSlice, BakeError> {
+    slice_of_strip(image, 0, view, sky, index, core_seconds)
+}
+
 fn slice_of_strip(image: &Image, x0: usize, view: &View, sky: &str, index: usize, core_seconds: f64) -> Result<RenderedSlice, BakeError> {
     let (w, h) = (view.width, view.height);
     let px: Vec<&crate::render::PixelResult> = (0..h).flat_map(|y| &image.pixels[y * image.width + x0..y * image.width + x0 + w]).collect();

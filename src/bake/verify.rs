@@ -125,6 +125,9 @@ pub struct SkyVerification {
     /// texel's largest channel (None without the cache).
     pub quantisation_median_rel: Option<f64>,
     pub quantisation_p99_rel: Option<f64>,
+    /// The global-fog LUTs against direct renders (None for a bake
+    /// without them).
+    pub fog: Option<super::verify_fog::FogVerification>,
 }
 
 /// The `p` quantile (nearest rank) of `v`, which it sorts; NaN if empty.
@@ -263,7 +266,8 @@ pub fn verify(
             Some(Some((m, p))) => (Some(m), Some(p)),
             _ => (None, None),
         };
-        out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp });
+        let fog = super::verify_fog::verify_fog(luts, &entry.name, &session, sky.altitude_m, opts.spp, &cancel)?;
+        out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp, fog });
     }
     Ok(out)
 }

@@ -145,6 +145,24 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                     }
                 }
             }
+            BakeEvent::FogSlice { sky, done, total } => {
+                if style == Style::Lines {
+                    let mut last = last_line.lock().unwrap();
+                    if last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
+                        *last = Some(Instant::now());
+                        eprintln!("sky bake-luts: {sky}: fog slice {done}/{total}");
+                    }
+                } else if let Some(b) = bar.lock().unwrap().as_ref() {
+                    b.set_message(format!("{sky}: fog {done}/{total}"));
+                }
+            }
+            BakeEvent::FogDone { sky, slices_rendered, slices_cached, core_seconds, falloff_a, falloff_p, fit_median, fit_p99 } => {
+                say(format!(
+                    "sky bake-luts: {sky}: fog and shadowed fog: {slices_rendered} slices rendered ({core_seconds:.1} core-s), {slices_cached} from the cache; falloff a = {falloff_a:.3}, p = {falloff_p:.3} (fit error median {:.1} %, p99 {:.1} %)",
+                    100.0 * fit_median,
+                    100.0 * fit_p99
+                ));
+            }
             BakeEvent::Farm { sky, index, farm } => say(format!("sky bake-luts: {sky}:{index}: {}", serde_json::to_string(farm).unwrap_or_default())),
         }
     })
@@ -242,7 +260,33 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         );
     }
     eprintln!("sky bake-luts: {} files, {:.2} MiB, and {}", manifest.skies.len(), total_bytes as f64 / 1048576.0, a.out.join("manifest.json").display());
+    if let Some(f) = &manifest.fog {
+        eprintln!(
+            "sky bake-luts: global fog: {} ({} bytes, {}x{}x{}: Fog and Shadowed Fog of every sky) and {} ({} bytes, {}x{}x{})",
+            f.file,
+            f.bytes,
+            f.width,
+            f.height,
+            f.layers,
+            f.attenuation.file,
+            f.attenuation.bytes,
+            f.attenuation.width,
+            f.attenuation.height,
+            f.attenuation.layers.len()
+        );
+    }
     if a.json {
+        let fog_json = manifest.fog.as_ref().map(|f| {
+            let fogs: Vec<_> = skies
+                .iter()
+                .filter_map(|s| s.fog.as_ref().map(|g| (s, g)))
+                .map(|(s, g)| {
+                    serde_json::json!({ "name": s.sky.name, "slices_rendered": g.rendered, "slices_cached": g.cached, "core_seconds": g.core_seconds,
+                        "falloff_a": g.extras.falloff.a, "falloff_p": g.extras.falloff.p, "falloff_error": g.extras.fit_error, "depth_free_error": g.extras.depth_free_error })
+                })
+                .collect();
+            serde_json::json!({ "file": f.file, "bytes": f.bytes, "layers": f.layers, "attenuation_file": f.attenuation.file, "attenuation_bytes": f.attenuation.bytes, "skies": fogs })
+        });
         let skies_json: Vec<_> = manifest
             .skies
             .iter()
@@ -260,7 +304,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             .collect();
         outln!(
             "{}",
-            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "errors": [] })
+            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "fog": fog_json, "errors": [] })
         );
     }
     Ok(ExitCode::SUCCESS)

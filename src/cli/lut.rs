@@ -85,6 +85,12 @@ pub struct SampleArgs {
     /// View direction: zenith angle and azimuth, degrees
     #[arg(long, value_name = "ZENITH,AZIMUTH", value_parser = parse_pair, allow_negative_numbers = true)]
     direction: (f64, f64),
+    /// Also the global fog in front of an object this far along the view, metres (bakes with fog LUTs)
+    #[arg(long, value_name = "M")]
+    depth_m: Option<f64>,
+    /// With --depth-m: how much clouds shade the air, 0 (sunlit: the Fog LUT) to 1 (the Shadowed Fog LUT)
+    #[arg(long, default_value_t = 0.0, requires = "depth_m")]
+    cloud_occlusion: f64,
     /// Print JSON
     #[arg(long)]
     json: bool,
@@ -181,8 +187,18 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             // The sun the sky texture leaves out (bakes with a transmittance file).
             let sun = luts.sun(c.sun_elevation_deg, c.haziness, c.cloudiness);
             let ambient = luts.ambient(c.sun_elevation_deg, c.haziness, c.cloudiness);
+            if let Some(depth) = a.depth_m {
+                if !(depth >= 0.0 && depth.is_finite() && (0.0..=1.0).contains(&a.cloud_occlusion)) {
+                    return usage(format!("--depth-m must be a distance of 0 m or more and --cloud-occlusion between 0 and 1, got {depth} and {}", a.cloud_occlusion));
+                }
+                if luts.fog.is_none() {
+                    eprintln!("{}: this bake has no fog LUTs (bake it again with this version of sky)", a.manifest.display());
+                    return Ok(ExitCode::from(EXIT_INVALID));
+                }
+            }
+            let fog = a.depth_m.and_then(|m| luts.fog(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d, m / 1000.0, a.cloud_occlusion));
             if a.json {
-                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun, "ambient": ambient }));
+                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun, "ambient": ambient, "fog": fog }));
             } else {
                 outln!("XYZ {:.6e} {:.6e} {:.6e}  (Y in cd/m^2)", xyz[0], xyz[1], xyz[2]);
                 outln!("RGB {:.6e} {:.6e} {:.6e}  (linear {space})", rgb[0], rgb[1], rgb[2]);
@@ -194,6 +210,20 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
                 if let Some(am) = ambient {
                     let (e, l) = (am.irradiance_up, am.mean_radiance);
                     outln!("sky irradiance on an upward surface RGB {:.6e} {:.6e} {:.6e}; mean sky radiance {:.6e} {:.6e} {:.6e}", e[0], e[1], e[2], l[0], l[1], l[2]);
+                }
+                if let Some(f) = fog {
+                    let (l, t) = (f.inscatter_rgb, f.attenuation_rgb);
+                    outln!(
+                        "fog in front of an object at {} m ({:.4} of the way to the fog's ceiling): in-scattered RGB {:.6e} {:.6e} {:.6e}, attenuation RGB {:.6} {:.6} {:.6}",
+                        a.depth_m.unwrap_or(0.0),
+                        f.normalised_depth,
+                        l[0],
+                        l[1],
+                        l[2],
+                        t[0],
+                        t[1],
+                        t[2]
+                    );
                 }
             }
             Ok(ExitCode::SUCCESS)
@@ -357,6 +387,19 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
         };
         outln!("{} sun (decoded irradiance against the optics' column table): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.sun_rel_y).collect()));
         outln!("{} ambient (decoded upward irradiance against the reference render integrated over its lattice): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.ambient_rel_y).collect()));
+        if let Some(f) = &s.fog {
+            let spread = |x: &sky::bake::verify_fog::Spread| format!("median {:.2} %, p99 {:.2} % over {}", 100.0 * x.median, 100.0 * x.p99, x.count);
+            outln!(
+                "{} fog (decoded against rendered fog, 100 m to 50 km, suns between slices; reference noise {:.2} %): fog {}; shadowed fog {}; attenuation {}",
+                s.sky,
+                100.0 * f.reference_noise,
+                spread(&f.fog),
+                spread(&f.shadowed),
+                spread(&f.attenuation)
+            );
+            let by_depth: Vec<String> = sky::bake::verify_fog::FOG_DEPTHS_KM.iter().zip(&f.fog_median_by_depth).map(|(d, m)| format!("{d} km {:.1} %", 100.0 * m)).collect();
+            outln!("{} fog median by depth: {}", s.sky, by_depth.join(", "));
+        }
     }
     outln!("interp: direction and slice interpolation together, direction: direction interpolation alone (median/p99), both measured on the atmosphere's noise-free single-scattering sky baked in memory at the bake's size (`sky lut interpolation`; ss: its share of the sky's luminance, median; n/a below the horizon, where that sky is no proxy)");
     for t in &twilight {

@@ -32,6 +32,8 @@ pub struct Luts {
     /// `SunEntry::transmittance_layer`), RGB, row-major; empty for a bake
     /// without one.
     pub transmittance: Vec<Vec<[f32; 3]>>,
+    /// The global-fog files (`decode_fog`); None for a bake without them.
+    pub fog: Option<super::decode_fog::FogTextures>,
 }
 
 /// The sun at the observer, decoded: what the sky texture leaves out.
@@ -171,6 +173,36 @@ impl Luts {
     }
 }
 
+/// The layers of an RGBA16F 2-D array texture (KTX2, vkFormat 97) of
+/// `width` × `height` × `layers`, RGB, row-major; read with the `ktx2`
+/// crate and checked against those sizes.
+pub(crate) fn read_rgba16f_array(path: &std::path::Path, width: usize, height: usize, layers: usize) -> Result<Vec<Vec<[f32; 3]>>, LoadError> {
+    let bytes = std::fs::read(path).map_err(|err| load_error(path, err.to_string()))?;
+    let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(path, format!("not a KTX2 file: {err:?}")))?;
+    let h = r.header();
+    let format = h.format.map(|f| f.value()).unwrap_or(0);
+    if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT || (h.pixel_width as usize, h.pixel_height as usize) != (width, height) || h.layer_count as usize != layers {
+        return Err(load_error(
+            path,
+            format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 97, {width} x {height} x {layers} layers", h.pixel_width, h.pixel_height, h.layer_count),
+        ));
+    }
+    let level = r.levels().next().ok_or_else(|| load_error(path, "no level 0"))?;
+    if level.data.len() != 8 * width * height * layers {
+        return Err(load_error(path, format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * width * height * layers)));
+    }
+    let texels: Vec<[f32; 3]> = level
+        .data
+        .chunks_exact(8)
+        .map(|b| {
+            let h = [0, 2, 4, 6].map(|i| u16::from_le_bytes([b[i], b[i + 1]]));
+            let v = super::rgba16f::unpack(h);
+            [v[0], v[1], v[2]]
+        })
+        .collect();
+    Ok(texels.chunks(width * height).map(<[[f32; 3]]>::to_vec).collect())
+}
+
 pub fn mat_mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
 }
@@ -238,34 +270,16 @@ impl Luts {
         }
         let mut transmittance = Vec::new();
         if let Some(t) = &manifest.transmittance {
-            let path = dir.join(&t.file);
-            let bytes = std::fs::read(&path).map_err(|err| load_error(&path, err.to_string()))?;
-            let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
-            let h = r.header();
-            let format = h.format.map(|f| f.value()).unwrap_or(0);
-            let (w, ht) = (super::transmittance::WIDTH, super::transmittance::HEIGHT);
-            if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT || (h.pixel_width as usize, h.pixel_height as usize) != (w, ht) || h.layer_count as usize != t.layers.len() {
-                return Err(load_error(
-                    &path,
-                    format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 97, {w} x {ht} x {} layers", h.pixel_width, h.pixel_height, h.layer_count, t.layers.len()),
-                ));
-            }
-            let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
-            if level.data.len() != 8 * w * ht * t.layers.len() {
-                return Err(load_error(&path, format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * w * ht * t.layers.len())));
-            }
-            let texels: Vec<[f32; 3]> = level
-                .data
-                .chunks_exact(8)
-                .map(|b| {
-                    let h = [0, 2, 4, 6].map(|i| u16::from_le_bytes([b[i], b[i + 1]]));
-                    let v = super::rgba16f::unpack(h);
-                    [v[0], v[1], v[2]]
-                })
-                .collect();
-            transmittance = texels.chunks(w * ht).map(<[[f32; 3]]>::to_vec).collect();
+            transmittance = read_rgba16f_array(&dir.join(&t.file), super::transmittance::WIDTH, super::transmittance::HEIGHT, t.layers.len())?;
         }
-        Ok(Luts { manifest, textures, transmittance })
+        let fog = match &manifest.fog {
+            Some(f) => Some(super::decode_fog::FogTextures {
+                fog: read_rgba16f_array(&dir.join(&f.file), f.width, f.height, f.layers)?,
+                attenuation: read_rgba16f_array(&dir.join(&f.attenuation.file), f.attenuation.width, f.attenuation.height, f.attenuation.layers.len())?,
+            }),
+            None => None,
+        };
+        Ok(Luts { manifest, textures, transmittance, fog })
     }
 
     /// The transmittance toward the top of one basis sky (manifest index
@@ -502,7 +516,7 @@ mod tests {
         let t2 = Texture { layers: t.layers.iter().map(|l| l.iter().map(|p| p.map(|v| 3.0 * v)).collect()).collect(), ..t.clone() };
         e.name = "clear".into();
         let manifest = crate::lut::manifest::tests::manifest_with(vec![e, hazed]);
-        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new() };
+        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new(), fog: None };
         let d = crate::render::camera::direction_deg(50.0, 20.0);
         let clear = luts.sample(30.0, 0.0, 0.0, 0.0, d);
         let half = luts.sample(30.0, 0.0, 0.5, 0.0, d);

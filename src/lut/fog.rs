@@ -99,10 +99,10 @@ pub fn fog_uv(elevation_deg: f64, azimuth_from_sun_deg: f64) -> (f64, f64) {
     (folded / 180.0, v_of_elevation(elevation_deg))
 }
 
-/// The view direction of Fog LUT texel (i, j) with the sun at azimuth 0:
-/// (elevation, azimuth), degrees.
-pub fn fog_texel_view(i: usize, j: usize) -> (f64, f64) {
-    (elevation_of_v(texel_position(j, FOG_HEIGHT)), 180.0 * texel_position(i, FOG_WIDTH))
+/// The view direction of texel (i, j) of a `width` × `height` Fog LUT
+/// with the sun at azimuth 0: (elevation, azimuth), degrees.
+pub fn fog_texel_view(i: usize, j: usize, width: usize, height: usize) -> (f64, f64) {
+    (elevation_of_v(texel_position(j, height)), 180.0 * texel_position(i, width))
 }
 
 /// The Attenuation LUT's (u, v) of an object at `depth_km` along a view of
@@ -156,6 +156,16 @@ impl AttenuationTable {
         AttenuationTable { geometry, xyz, unattenuated_xyz: weighted(&scene.bands.weight, &vec![1.0; scene.band_optics.len()]) }
     }
 
+    /// The per-channel transmittance (space of `m`) of one view to one
+    /// depth, computed as the table's texels are but at any point: what
+    /// the decoded table is checked against (`bake::verify_fog`).
+    pub fn direct_rgb(scene: &Scene, geometry: &FogGeometry, depth_km: f64, elevation_deg: f64, m: &Mat3) -> [f64; 3] {
+        let ss = SingleScattering::bands(scene, glam::DVec3::Z, geometry.observer_altitude_km);
+        let t = ss.transmittance_to(direction_deg(90.0 - elevation_deg.clamp(0.0, 90.0), 0.0), depth_km, Some(geometry.ceiling_km));
+        let (xyz, top) = (weighted(&scene.bands.weight, &t), weighted(&scene.bands.weight, &vec![1.0; t.len()]));
+        super::transmittance::channel_ratio(super::transmittance::mul(m, xyz), super::transmittance::mul(m, top))
+    }
+
     /// Per-channel transmittance of every texel in the space of matrix
     /// `m` (XYZ → RGB), in texel order.
     pub fn channel_texels(&self, m: &Mat3) -> Vec<[f64; 3]> {
@@ -183,12 +193,17 @@ fn weighted(weight: &[[f64; 3]], t: &[f64]) -> [f64; 3] {
 }
 
 /// Bilinear lookup between texel centres of a row-major `w` × `h` table
-/// at (u, v) in [0, 1]² (clamped).
+/// at (u, v) in [0, 1]² (clamped), texel i of n at i / (n − 1).
 pub fn bilinear(texels: &[[f64; 3]], w: usize, h: usize, u: f64, v: f64) -> [f64; 3] {
+    bilinear_by(|i| texels[i], w, h, u, v)
+}
+
+/// [`bilinear`] of the texels `texel(index)` gives.
+pub fn bilinear_by(texel: impl Fn(usize) -> [f64; 3], w: usize, h: usize, u: f64, v: f64) -> [f64; 3] {
     let (fx, fy) = (u.clamp(0.0, 1.0) * (w - 1) as f64, v.clamp(0.0, 1.0) * (h - 1) as f64);
     let (i, j) = ((fx as usize).min(w - 2), (fy as usize).min(h - 2));
     let (ax, ay) = (fx - i as f64, fy - j as f64);
-    let at = |i: usize, j: usize| texels[j * w + i];
+    let at = |i: usize, j: usize| texel(j * w + i);
     let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
     std::array::from_fn(|k| (1.0 - ay) * ((1.0 - ax) * a[k] + ax * b[k]) + ay * ((1.0 - ax) * c[k] + ax * d[k]))
 }
@@ -299,7 +314,7 @@ mod tests {
         }
         for j in 0..FOG_HEIGHT {
             for i in 0..FOG_WIDTH {
-                let (e, a) = fog_texel_view(i, j);
+                let (e, a) = fog_texel_view(i, j, FOG_WIDTH, FOG_HEIGHT);
                 let (u, v) = fog_uv(e, a);
                 assert!((u - texel_position(i, FOG_WIDTH)).abs() < 1e-12 && (v - texel_position(j, FOG_HEIGHT)).abs() < 1e-12);
                 for mirrored in [-a, 360.0 - a] {
@@ -308,8 +323,8 @@ mod tests {
                 }
             }
         }
-        assert_eq!(fog_texel_view(0, 0), (0.0, 0.0));
-        assert_eq!(fog_texel_view(FOG_WIDTH - 1, FOG_HEIGHT - 1), (90.0, 180.0));
+        assert_eq!(fog_texel_view(0, 0, FOG_WIDTH, FOG_HEIGHT), (0.0, 0.0));
+        assert_eq!(fog_texel_view(FOG_WIDTH - 1, FOG_HEIGHT - 1, FOG_WIDTH, FOG_HEIGHT), (90.0, 180.0));
         assert_eq!(fog_uv(-10.0, 30.0).1, 0.0);
     }
 

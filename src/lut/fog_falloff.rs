@@ -11,7 +11,7 @@ use crate::render::camera::Camera;
 use crate::render::fog::Fog;
 use crate::render::tracer::Estimator;
 use crate::render::{render, RenderError, Scene, SingleScatter, View};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
 /// View elevations of the study, degrees: the horizon's neighbourhood,
@@ -34,7 +34,7 @@ pub struct FogCurve {
 }
 
 /// Median and 99th percentile of relative errors.
-#[derive(Debug, Clone, Copy, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ErrorSummary {
     pub median: f64,
     pub p99: f64,

@@ -32,6 +32,78 @@ pub struct Manifest {
     /// 2; absent from bakes made before it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub transmittance: Option<TransmittanceEntry>,
+    /// The global-fog LUTs of every basis sky (added within version 2;
+    /// absent from bakes made before them).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fog: Option<FogEntry>,
+}
+
+/// The global-fog LUTs (`lut::fog`, `bake::fog`): the Fog and Shadowed Fog
+/// LUTs of every basis sky in one RGBA16F 2-D array, and the Attenuation
+/// LUTs in another.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FogEntry {
+    pub file: String,
+    /// "R16G16B16A16_SFLOAT" (vkFormat 97).
+    pub format: String,
+    pub vk_format: u32,
+    pub bytes: u64,
+    pub width: usize,
+    pub height: usize,
+    pub layers: usize,
+    /// Which layer holds what.
+    pub layer_order: String,
+    /// Only the air below this altitude makes fog, km.
+    pub ceiling_km: f64,
+    /// How a texel's (u, v) maps to a view direction.
+    pub mapping: String,
+    /// What a texel holds and how to apply it at a depth.
+    pub channels: String,
+    pub falloff: String,
+    pub attenuation: AttenuationEntry,
+    /// In the order of `skies`.
+    pub skies: Vec<FogSkyEntry>,
+}
+
+/// The Attenuation LUT file: a layer per basis sky.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AttenuationEntry {
+    pub file: String,
+    pub format: String,
+    pub vk_format: u32,
+    pub bytes: u64,
+    pub width: usize,
+    pub height: usize,
+    /// The basis sky of each layer.
+    pub layers: Vec<String>,
+    pub mapping: String,
+    pub channels: String,
+}
+
+/// One basis sky's fog.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FogSkyEntry {
+    pub name: String,
+    /// Its Fog LUT's slice 0; the Shadowed Fog LUT's slice 0 is
+    /// `first_layer + slices`.
+    pub first_layer: usize,
+    pub slices: usize,
+    pub observer_altitude_km: f64,
+    pub planet_radius_km: f64,
+    pub falloff_a: f64,
+    pub falloff_p: f64,
+    /// The falloff's relative error against its reference fog renders.
+    pub falloff_error_median: f64,
+    pub falloff_error_p99: f64,
+    /// The same of the depth-free alternative (the LUT at every depth).
+    pub depth_free_error_median: f64,
+    pub depth_free_error_p99: f64,
+    /// Per slice: stored = value * 2^scale_log2.
+    pub fog_scale_log2: Vec<i32>,
+    pub shadowed_scale_log2: Vec<i32>,
+    /// Sun zenith angle of each slice, degrees (the sky's time mapping).
+    pub sun_zenith_deg: Vec<f64>,
+    pub attenuation_layer: usize,
 }
 
 /// The transmittance LUT file: one RGBA16F 2-D array, a layer per basis
@@ -239,6 +311,7 @@ pub(crate) mod tests {
             weather: weather(),
             skies,
             transmittance: None,
+            fog: None,
         }
     }
 

@@ -9,6 +9,7 @@ pub mod colour;
 pub mod colour_error;
 pub mod dds;
 pub mod decode;
+pub mod decode_fog;
 pub mod error_map;
 pub mod fog;
 pub mod fog_falloff;
