@@ -10,7 +10,7 @@ space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost
+.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
 
 all: build
 
@@ -55,12 +55,14 @@ demo: build
 	$(SKY) mie --m 1.33-1e-7i --lognormal 4.0,0.55 --wavelength-nm 550
 	$(SKY) render atmospheres/clear.toml --camera fisheye --size 128x128 --sun-zenith-deg 80 --spp 256 --max-rel-error 0.05 --denoise --out $(OUT)/clear_fisheye.exr --png $(OUT)/clear_fisheye.png
 	$(SKY) bake-luts bakes/demo.toml --out $(OUT)/luts --quality draft
-	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --directions 200 --spp 64 --plot $(OUT)/luts/verify
+	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --directions 200 --spp 64 --fog-spp 256 --plot $(OUT)/luts/verify
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --camera fisheye --size 256x256 --out $(OUT)/decoded.exr --png $(OUT)/decoded.png
 	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 60,180
+	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 88,90 --depth-m 20000
+	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --sun-azimuth-deg 60 --haziness 0.5 --camera pinhole --look-elevation-deg 3 --fov-deg 40 --size 480x160 --landscape --out $(OUT)/landscape.exr --png $(OUT)/landscape.png
 	$(SKY) lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot $(OUT)/fog
 	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png;"
-	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png; the fitted fog falloff in $(OUT)/fog/falloff.png"
+	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png; a landscape seen through the decoded fog in $(OUT)/landscape.png, the fitted fog falloff in $(OUT)/fog/falloff.png"
 
 # Benchmarks reported in the README.
 bench: build
@@ -150,3 +152,10 @@ validate: build
 # checks (tests/fuzz.rs; `make test` runs a short version of each).
 fuzz:
 	$(CARGO) test --release --locked --test fuzz -- --ignored --nocapture
+
+# The README's blue mountains: the two sunny basis skies and their fog LUTs at 32 samples a texel
+# (bakes/fog-look.toml, about 8 minutes on 2 cores), decoded with ridges at 2 to 100 km at three
+# times of day.
+fog-pictures: build
+	$(SKY) bake-luts bakes/fog-look.toml --out $(OUT)/fog-look
+	for e in 35 8 2; do $(SKY) lut decode $(OUT)/fog-look/manifest.json --sun-elevation-deg $$e --sun-azimuth-deg 120 --haziness 0.15 --camera pinhole --look-elevation-deg 4 --fov-deg 40 --size 480x160 --landscape --out $(OUT)/fog-look/landscape_$$e.exr --png docs/images/fog_landscape_sun_$$e.png || exit 1; done

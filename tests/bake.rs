@@ -202,9 +202,14 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", first.to_str().unwrap()], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cache = sky::bake::SliceCache::open(&first.join("cache")).unwrap();
-    let file = std::fs::read_dir(first.join("cache")).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|x| x == "slice")).unwrap();
-    let key = file.file_stem().unwrap().to_str().unwrap().to_string();
-    let mut slice = cache.get(&key).unwrap();
+    // A sky's slice (4 wide), not a fog slice (8 x 8: the same cache).
+    let (key, mut slice) = std::fs::read_dir(first.join("cache"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "slice"))
+        .map(|p| p.file_stem().unwrap().to_str().unwrap().to_string())
+        .find_map(|k| cache.get(&k).filter(|s| s.width == 4).map(|s| (k, s)))
+        .unwrap();
     // Texel (u 1, v 2) of a 4-wide slice.
     slice.xyz[2 * 4 + 1][1] = f64::NAN;
     cache.put(&key, &slice).unwrap();
@@ -466,7 +471,8 @@ fn lut_verify_reports_every_elevation() {
     summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let m = out.join("manifest.json");
     let plots = tmp.path().join("plots");
-    let o = sky(&["lut", "verify", m.to_str().unwrap(), "--bake", bake.to_str().unwrap(), "--directions", "40", "--spp", "4", "--plot", plots.to_str().unwrap(), "--json"], tmp.path());
+    let o =
+        sky(&["lut", "verify", m.to_str().unwrap(), "--bake", bake.to_str().unwrap(), "--directions", "40", "--spp", "4", "--fog-spp", "16", "--plot", plots.to_str().unwrap(), "--json"], tmp.path());
     let v = summary(&o);
     let skies = v["skies"].as_array().unwrap();
     assert_eq!(skies.len(), 2);

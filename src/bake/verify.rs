@@ -52,6 +52,8 @@ pub struct VerifyOptions {
     pub directions: usize,
     /// Samples per reference direction.
     pub spp: u32,
+    /// Samples per direction of the fog's references (`verify_fog`).
+    pub fog_spp: u32,
     /// Slice-centre elevations are taken from these slice indices.
     pub centre_slices: Vec<usize>,
     pub workers: Vec<WorkerSpec>,
@@ -59,7 +61,7 @@ pub struct VerifyOptions {
 
 impl Default for VerifyOptions {
     fn default() -> VerifyOptions {
-        VerifyOptions { directions: 400, spp: 256, centre_slices: vec![10, 30, 44, 47, 52, 60], workers: Vec::new() }
+        VerifyOptions { directions: 400, spp: 256, fog_spp: 4096, centre_slices: vec![10, 30, 44, 47, 52, 60], workers: Vec::new() }
     }
 }
 
@@ -266,7 +268,7 @@ pub fn verify(
             Some(Some((m, p))) => (Some(m), Some(p)),
             _ => (None, None),
         };
-        let fog = super::verify_fog::verify_fog(luts, &entry.name, &session, sky.altitude_m, opts.spp, &cancel)?;
+        let fog = super::verify_fog::verify_fog(luts, &entry.name, &session, sky.altitude_m, opts.fog_spp, &cancel)?;
         out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp, fog });
     }
     Ok(out)

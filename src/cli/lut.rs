@@ -51,6 +51,9 @@ pub struct VerifyArgs {
     /// Samples per reference direction
     #[arg(long, default_value_t = 256)]
     spp: u32,
+    /// Samples per direction of the fog's references (15 directions x 30 renders per basis sky; fog near the camera is faint and its light scattered more than once is noisy)
+    #[arg(long, default_value_t = 4096)]
+    fog_spp: u32,
     /// Twilight curves (PNG, one per basis sky) into this folder
     #[arg(long, value_name = "DIR")]
     plot: Option<PathBuf>,
@@ -137,6 +140,12 @@ pub struct DecodeArgs {
     /// else its irradiance in the pixel nearest it
     #[arg(long)]
     sun_disk: bool,
+    /// Put ridges of mountains at 2 to 100 km in front of the sky, lit by the decoded sun and sky and seen through the decoded global fog (the talk's blue mountains; bakes with fog LUTs)
+    #[arg(long)]
+    landscape: bool,
+    /// With --landscape: how much clouds shade the air, 0 (the Fog LUT) to 1 (the Shadowed Fog LUT)
+    #[arg(long, default_value_t = 0.0, requires = "landscape")]
+    cloud_occlusion: f64,
 }
 
 fn parse_pair(s: &str) -> Result<(f64, f64), String> {
@@ -244,7 +253,24 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
                 CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
             };
             let (w, h) = a.size;
-            let Some(xyz) = luts.decode_image(&camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.sun_disk) else {
+            if a.landscape {
+                if !(0.0..=1.0).contains(&a.cloud_occlusion) {
+                    return usage(format!("--cloud-occlusion must be between 0 and 1, got {}", a.cloud_occlusion));
+                }
+                if a.sun_disk {
+                    return usage("--landscape draws no sun disk; leave out --sun-disk");
+                }
+            }
+            let decoded = if a.landscape {
+                sky::lut::landscape::decode_landscape(&luts, &camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.cloud_occlusion, 0.15)
+            } else {
+                luts.decode_image(&camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.sun_disk)
+            };
+            if a.landscape && decoded.is_none() {
+                eprintln!("sky lut decode: --landscape: {} has no fog LUTs or no sun; bake it again with this version of sky", a.manifest.display());
+                return Ok(ExitCode::from(EXIT_INVALID));
+            }
+            let Some(xyz) = decoded else {
                 eprintln!("sky lut decode: --sun-disk: {} has no sun (a bake made before the transmittance file); bake it again", a.manifest.display());
                 return Ok(ExitCode::from(EXIT_INVALID));
             };
@@ -271,8 +297,8 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
 
 fn verify(a: VerifyArgs) -> Result<ExitCode> {
     use sky::bake::verify::{largest_log_step, reference_twilight_step, twilight_curve, verify, VerifyOptions};
-    if a.directions == 0 || a.spp == 0 {
-        return usage("--directions and --spp must be at least 1");
+    if a.directions == 0 || a.spp == 0 || a.fog_spp == 0 {
+        return usage("--directions, --spp and --fog-spp must be at least 1");
     }
     let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
     let Some(bake) = super::bake::load_bake(&a.bake) else { return Ok(ExitCode::from(EXIT_INVALID)) };
@@ -280,7 +306,7 @@ fn verify(a: VerifyArgs) -> Result<ExitCode> {
     let cache = cache_dir.is_dir().then(|| sky::bake::SliceCache::open(&cache_dir).ok()).flatten();
     let mie = sky::mie::MieCache::from_env();
     let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let opts = VerifyOptions { directions: a.directions, spp: a.spp, ..VerifyOptions::default() };
+    let opts = VerifyOptions { directions: a.directions, spp: a.spp, fog_spp: a.fog_spp, ..VerifyOptions::default() };
     eprintln!("sky lut verify: rendering references ({} directions, {} spp) at 13 sun elevations per basis sky", a.directions, a.spp);
     let optics = sky::session::OpticsCache::default();
     let started = std::time::Instant::now();

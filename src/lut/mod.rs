@@ -15,6 +15,7 @@ pub mod fog;
 pub mod fog_falloff;
 pub mod interpolation;
 pub mod ktx2;
+pub mod landscape;
 pub mod manifest;
 pub mod mapping;
 pub mod minifloat;
