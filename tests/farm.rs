@@ -672,8 +672,9 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
 }
 
 /// `sky bake-luts` over two `sky worker` daemons: each basis sky's slices
-/// go to the farm as one job (a strip of slices), and the baked files are
-/// byte-identical to those of the embedded worker.
+/// go to the farm as one job (a strip of slices), the fog slices a job
+/// each, and the baked files are byte-identical to those of the embedded
+/// worker.
 #[test]
 fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
     let mut farm = Farm::new();
@@ -690,7 +691,11 @@ fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
     for k in on_farm["skies"].as_array().unwrap() {
         assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(63), Some(1)), "{on_farm}");
     }
-    for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "manifest.json"] {
+    // The fog LUTs' slices went to the workers too (a farm job each).
+    for k in on_farm["fog"]["skies"].as_array().unwrap() {
+        assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(126), Some(2)), "{on_farm}");
+    }
+    for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"] {
         assert!(std::fs::read(farm.path("farm").join(f)).unwrap() == std::fs::read(farm.path("local").join(f)).unwrap(), "{f} differs between the farm's bake and the embedded worker's");
     }
 }

@@ -9,8 +9,9 @@
 //! Slices are cached like the sky's (the key is the view, which names the
 //! fog), the falloff and the Attenuation table under a key of their own, so
 //! a re-run renders nothing and a stopped bake resumes at the slice it was
-//! on. They render on this process's threads, after the sky's slices; the
-//! farm does not take them yet.
+//! on. The slices render through the bake's session (the embedded worker or
+//! `sky worker` daemons), one farm job a slice, after the sky's slices; the
+//! falloff's references and the Attenuation table on this process.
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BasisSky, FogSettings, Quality, Sampling};
@@ -124,9 +125,17 @@ pub struct FogJob<'a> {
     pub quality: Quality,
 }
 
-/// Renders (or finds in `cache`) the fog LUTs of one basis sky on the
-/// current rayon pool; `on_slice(done, total)` after each slice.
-pub fn bake_fog(job: &FogJob, cache: &SliceCache, cancel: &AtomicBool, on_slice: &dyn Fn(usize, usize)) -> Result<SkyFog, BakeError> {
+/// Renders (or finds in `cache`) the fog LUTs of one basis sky: each slice
+/// not in the cache by `render(view, slice index)` (the bake's session:
+/// the embedded worker or the farm); `on_slice(done, total)` after each
+/// slice. A slice's cost is its render's wall time on the bake's cores.
+pub fn bake_fog(
+    job: &FogJob,
+    cache: &SliceCache,
+    cancel: &AtomicBool,
+    render: &dyn Fn(&View, usize) -> Result<crate::render::Image, BakeError>,
+    on_slice: &dyn Fn(usize, usize),
+) -> Result<SkyFog, BakeError> {
     let (sky, atm, scene) = (job.sky, job.atmosphere, job.scene);
     let spectral = &scene.spectral;
     let (radius_km, top_km) = (atm.planet.radius_km, atm.planet.top_km);
@@ -148,7 +157,7 @@ pub fn bake_fog(job: &FogJob, cache: &SliceCache, cancel: &AtomicBool, on_slice:
                 }
                 None => {
                     let start = Instant::now();
-                    let image = crate::render::render(scene, &view, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+                    let image = render(&view, index)?;
                     let what = if shadowed { "shadowed fog" } else { "fog" };
                     let slice = slice_of_image(&image, &view, &format!("{} ({what})", sky.name), index, start.elapsed().as_secs_f64() * threads)?;
                     cache.put(&key, &slice)?;

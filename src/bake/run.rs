@@ -171,6 +171,9 @@ struct Tracker {
     cores: usize,
     /// Rendering pilots: the farm's progress is not the bake's.
     planning: bool,
+    /// Rendering fog slices: not in the bake's texel count (they report
+    /// their own `FogSlice` events).
+    fog: bool,
     sink: Option<BakeSink>,
 }
 
@@ -386,6 +389,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         forecast_done: 0.0,
         cores: opts.cores,
         planning: false,
+        fog: false,
         sink: opts.events.clone(),
     }));
     tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, texels_to_render });
@@ -500,7 +504,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     }
     let mut done = Vec::new();
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
-    for (k, (Planned { mut out, views, same_as, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
+    for (k, (Planned { mut out, views, same_as, bundle, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
             if let Some(s) = s {
@@ -515,7 +519,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
-        if let Some(session) = session {
+        if let Some(session) = &session {
             // Every view to render, once: one strip, one farm job, so that
             // workers go from slice to slice without waiting at each.
             let todo: Vec<usize> = (0..views.len()).filter(|&i| views[i].is_some() && same_as[i].is_none()).collect();
@@ -535,7 +539,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     t.current = (name.clone(), todo[0]);
                     t.job = Some(StripJob { sky: name.clone(), indices: todo.clone(), slice_width: w, height: h, cumulative_forecast: cumulative });
                 }
-                let (image, core_seconds, resumed) = render_strip(&session, &strip, &opts.cache, &name, &todo, opts.cores, cancel.clone())?;
+                let (image, core_seconds, resumed) = render_strip(session, &strip, &opts.cache, &name, &todo, opts.cores, cancel.clone())?;
                 out.columns_resumed += resumed;
                 sky_core_seconds += core_seconds;
                 // The strip's cost shared by the slices in proportion to their samples.
@@ -590,11 +594,26 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             };
         }
         if opts.only.is_none() {
-            // The global-fog LUTs, on this process's threads.
+            // The global-fog LUTs, through the sky's session (the same
+            // workers; one made now if every sky slice was cached).
             let scene = optics.get(&atms[k], &out.spectral, mie, &|| {});
             let job = super::fog::FogJob { sky: &out.sky, atmosphere: &atms[k], scene: &scene, sampling: &out.sampling, settings: bake.fog, quality: opts.quality };
             let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
-            let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &on_slice)?;
+            let made: std::sync::OnceLock<Session> = std::sync::OnceLock::new();
+            let render = |view: &View, index: usize| -> Result<Image, BakeError> {
+                let s = session.as_ref().unwrap_or_else(|| {
+                    made.get_or_init(|| Session::new(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {}))
+                });
+                {
+                    let mut t = tracker.lock().unwrap();
+                    t.current = (format!("{name} (fog)"), index);
+                    t.fog = true;
+                }
+                let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source });
+                tracker.lock().unwrap().fog = false;
+                r.map(|r| r.image)
+            };
+            let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &render, &on_slice)?;
             tracker.lock().unwrap().emit(BakeEvent::FogDone {
                 sky: name.clone(),
                 slices_rendered: fog.rendered,
@@ -624,7 +643,7 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
     farm.events = Some(EventSink::new(move |e| {
         let mut t = t.lock().unwrap();
         match e {
-            FarmEvent::Progress(_) if t.planning => {}
+            FarmEvent::Progress(_) if t.planning || t.fog => {}
             FarmEvent::Progress(p) => {
                 let p = t.progress(p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));

@@ -29,7 +29,9 @@ use glam::DVec3;
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Fog {
     /// The object's distance along each camera ray, km (infinite: none;
-    /// the ground ends the ray where it comes first).
+    /// the ground ends the ray where it comes first). Travels as null when
+    /// infinite (JSON has no infinity: farm tasks carry views as JSON).
+    #[serde(with = "infinite_as_null")]
     pub max_distance_km: f64,
     /// Only the air below this altitude scatters toward the camera (and
     /// dims the camera ray): the cloud base. None: all of the atmosphere.
@@ -72,5 +74,40 @@ impl Fog {
     pub fn reach_km(&self, medium: &Medium, p: DVec3, d: DVec3) -> f64 {
         let through_ceiling = self.ceiling_km.and_then(|c| medium.distance_to_altitude(p, d, c, true)).unwrap_or(f64::INFINITY);
         self.max_distance_km.min(through_ceiling)
+    }
+}
+
+/// A distance that may be infinite, (de)serialised as an optional number:
+/// None for infinity.
+mod infinite_as_null {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
+        if v.is_finite() {
+            s.serialize_some(v)
+        } else {
+            s.serialize_none()
+        }
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+        Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::INFINITY))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A fog with no object travels through JSON (a farm task's view) and
+    /// postcard (a journal) and comes back infinite; a finite one exactly.
+    #[test]
+    fn an_infinite_distance_round_trips() {
+        for fog in [Fog::lit(f64::INFINITY, Some(3.0)), Fog::lit(12.5, None).shadowed()] {
+            let json = serde_json::to_string(&fog).unwrap();
+            assert_eq!(serde_json::from_str::<Fog>(&json).unwrap(), fog, "{json}");
+            let bytes = postcard::to_allocvec(&fog).unwrap();
+            assert_eq!(postcard::from_bytes::<Fog>(&bytes).unwrap(), fog);
+        }
     }
 }
