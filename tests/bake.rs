@@ -332,6 +332,24 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         let decoded = luts.ambient(elevation, 0.0, 0.0).unwrap();
         assert!((decoded.irradiance_up[1] / a.irradiance_up[1] - 1.0).abs() < 1e-9);
     }
+    // ambient.ktx2 holds the same numbers to binary16's rounding (half a
+    // unit in the last place of the layer's largest magnitude at most,
+    // 2^-11 of it), signs included.
+    let file = luts.manifest.ambient_file.as_ref().expect("an ambient file");
+    assert_eq!((file.vk_format, file.width, file.height, file.layers.len()), (97, 64, 11, 1));
+    let scale = (-file.scale_log2[0] as f64).exp2();
+    let max = ambient.iter().flat_map(|a| a.sh9.iter().flatten().chain(a.irradiance_up.iter()).chain(a.mean_radiance.iter())).fold(0.0f64, |m, v| m.max(v.abs()));
+    let mut negative = 0;
+    for (i, a) in ambient.iter().enumerate() {
+        for (row, want) in [a.irradiance_up, a.mean_radiance].into_iter().chain(a.sh9).enumerate() {
+            let got = luts.ambient_texture[0][row * 64 + i];
+            for c in 0..3 {
+                negative += (want[c] < 0.0) as usize;
+                assert!((got[c] as f64 * scale - want[c]).abs() <= max * 2f64.powi(-11), "slice {i}, row {row}, channel {c}: {} against {}", got[c] as f64 * scale, want[c]);
+            }
+        }
+    }
+    assert!(negative > 0, "no negative coefficient: the signs were not tested");
 }
 
 #[test]

@@ -11,6 +11,7 @@ pub mod fog;
 pub mod lighting;
 pub mod openjd;
 pub mod pack;
+pub mod pack_ambient;
 pub mod pack_fog;
 pub mod run;
 pub mod verify;

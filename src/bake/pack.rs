@@ -251,6 +251,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         skies,
         transmittance: None,
         fog: None,
+        ambient_file: None,
     }
 }
 
@@ -272,8 +273,10 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
         stats.push(p.stats);
     }
     let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
+    let ambient_file = super::pack_ambient::write_ambient(&entries, colour, dir)?;
     let mut m = manifest(quality, colour, entries);
     m.transmittance = transmittance;
+    m.ambient_file = ambient_file;
     m.fog = match fog {
         Some(f) => Some(f.write(colour, dir)?),
         None => None,

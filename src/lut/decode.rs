@@ -34,6 +34,9 @@ pub struct Luts {
     pub transmittance: Vec<Vec<[f32; 3]>>,
     /// The global-fog files (`decode_fog`); None for a bake without them.
     pub fog: Option<super::decode_fog::FogTextures>,
+    /// `ambient.ktx2`'s layers as stored (`bake::pack_ambient`: rows of
+    /// slices, before the layer's scale); empty for a bake without it.
+    pub ambient_texture: Vec<Vec<[f32; 3]>>,
 }
 
 /// The sun at the observer, decoded: what the sky texture leaves out.
@@ -279,7 +282,11 @@ impl Luts {
             }),
             None => None,
         };
-        Ok(Luts { manifest, textures, transmittance, fog })
+        let ambient_texture = match &manifest.ambient_file {
+            Some(a) => read_rgba16f_array(&dir.join(&a.file), a.width, a.height, a.layers.len())?,
+            None => Vec::new(),
+        };
+        Ok(Luts { manifest, textures, transmittance, fog, ambient_texture })
     }
 
     /// The transmittance toward the top of one basis sky (manifest index
@@ -516,7 +523,7 @@ mod tests {
         let t2 = Texture { layers: t.layers.iter().map(|l| l.iter().map(|p| p.map(|v| 3.0 * v)).collect()).collect(), ..t.clone() };
         e.name = "clear".into();
         let manifest = crate::lut::manifest::tests::manifest_with(vec![e, hazed]);
-        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new(), fog: None };
+        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new(), fog: None, ambient_texture: Vec::new() };
         let d = crate::render::camera::direction_deg(50.0, 20.0);
         let clear = luts.sample(30.0, 0.0, 0.0, 0.0, d);
         let half = luts.sample(30.0, 0.0, 0.5, 0.0, d);

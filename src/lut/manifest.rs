@@ -36,6 +36,29 @@ pub struct Manifest {
     /// absent from bakes made before them).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fog: Option<FogEntry>,
+    /// The skies' ambient light per slice as a texture (added within
+    /// version 2; the same numbers as each sky's `ambient`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ambient_file: Option<AmbientFileEntry>,
+}
+
+/// `ambient.ktx2`: per basis sky a layer of 64 columns (slices) by 11 rows
+/// (irradiance on an upward surface, mean radiance of the upper
+/// hemisphere, and the nine spherical-harmonic coefficients L00, L1-1,
+/// L10, L11, L2-2, L2-1, L20, L21, L22), RGBA16F with signed halves.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AmbientFileEntry {
+    pub file: String,
+    pub format: String,
+    pub vk_format: u32,
+    pub bytes: u64,
+    pub width: usize,
+    pub height: usize,
+    /// The basis sky of each layer.
+    pub layers: Vec<String>,
+    pub rows: Vec<String>,
+    /// Per layer: value = stored * 2^-scale_log2.
+    pub scale_log2: Vec<i32>,
 }
 
 /// The global-fog LUTs (`lut::fog`, `bake::fog`): the Fog and Shadowed Fog
@@ -312,6 +335,7 @@ pub(crate) mod tests {
             skies,
             transmittance: None,
             fog: None,
+            ambient_file: None,
         }
     }
 

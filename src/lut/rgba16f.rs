@@ -38,6 +38,20 @@ fn pack_classified(rgb: [f64; 3]) -> Result<([u16; 4], [minifloat::Rounding; 3])
     Ok((out, kinds))
 }
 
+/// Packs signed linear values into R, G, B, A = 1 halves: each channel's
+/// magnitude rounded as [`pack`] rounds it, with binary16's sign bit set
+/// for a negative value (spherical-harmonic coefficients are signed; the
+/// sky's texels are not, and go through [`pack`]).
+pub fn pack_signed(rgb: [f64; 3]) -> Result<[u16; 4], PackError> {
+    let mut out = pack(rgb.map(f64::abs))?;
+    for c in 0..3 {
+        if rgb[c] < 0.0 && out[c] != 0 {
+            out[c] |= 0x8000;
+        }
+    }
+    Ok(out)
+}
+
 /// The four channels of a texel, exactly.
 pub fn unpack(h: [u16; 4]) -> [f32; 4] {
     h.map(|v| {
@@ -74,6 +88,14 @@ mod tests {
         assert_eq!(pack([0.1, std::f64::consts::PI, 1000.0]).unwrap(), [0x2E66, 0x4248, 0x63D0, ONE]);
         assert_eq!(unpack([0x3C00, 0x7BFF, 0x0001, 0xBC00]), [1.0, 65504.0, 2f32.powi(-24), -1.0]);
         assert!(matches!(pack([1.0, 1.0, f64::NAN]), Err(PackError::NotFinite { channel: Channel::B, .. })));
+    }
+
+    /// Signed values keep their sign and round their magnitude as `pack`.
+    #[test]
+    fn signed_halves() {
+        assert_eq!(pack_signed([-1.0, 0.5, -0.0]).unwrap(), [0xBC00, 0x3800, 0, ONE]);
+        assert_eq!(unpack(pack_signed([-0.1, -1e6, 3.0]).unwrap()), [-unpack(pack([0.1, 0.0, 0.0]).unwrap())[0], -65504.0, 3.0, 1.0]);
+        assert!(pack_signed([f64::NAN, 0.0, 0.0]).is_err());
     }
 
     /// Every finite non-negative half round-trips, and midpoints tie to even.
