@@ -231,7 +231,7 @@ impl Falloff {
     /// linearly with its length).
     pub fn fraction(&self, x: f64, theta: f64) -> f64 {
         let k = self.a * theta.max(1e-6).powf(self.p);
-        if !(k > 1e-9) {
+        if !(k.abs() > 1e-9) {
             return x;
         }
         libm::expm1(-k * x) / libm::expm1(-k)
@@ -240,34 +240,43 @@ impl Falloff {
     /// The least-squares fit of (a, p) to `samples` in relative error
     /// (each residual over its reference ratio, so that fog near the camera,
     /// a small fraction of the whole, weighs as much as fog far away): a
-    /// search over log a in [−4, 8] and p in [−3, 6], refined five times
-    /// around the best point to a tenth of the previous grid's extent. The
-    /// fit is smooth in both, so the refinement finds the minimum to well
-    /// below the fit's own error. Samples with a ratio that is not positive
-    /// are left out.
+    /// search over log |a| in [−4, 6] for either sign of a and p in [−3,
+    /// 6], refined five times around the best point to a tenth of the
+    /// previous grid's extent. The fit is smooth in both, so the refinement
+    /// finds the minimum to well below the fit's own error. A negative a
+    /// makes the fraction convex in x: fog that gathers mostly far from the
+    /// camera, as under a cloud base that lights the air below it (the
+    /// talk's a is not said to be positive). Samples with a ratio that is
+    /// not positive are left out.
     pub fn fit(samples: &[FalloffSample]) -> Falloff {
         let used: Vec<&FalloffSample> = samples.iter().filter(|s| s.ratio > 0.0 && s.ratio.is_finite()).collect();
-        let cost = |ln_a: f64, p: f64| -> f64 {
-            let f = Falloff { a: ln_a.exp(), p };
+        let cost = |a: f64, p: f64| -> f64 {
+            let f = Falloff { a, p };
             used.iter().map(|s| (f.fraction(s.x, s.theta) / s.ratio - 1.0).powi(2)).sum()
         };
-        let (mut lo_a, mut hi_a, mut lo_p, mut hi_p) = (-4.0f64, 8.0f64, -3.0f64, 6.0f64);
-        let mut best = (0.0, 1.0, f64::INFINITY);
-        let n = 40;
-        for _ in 0..6 {
-            for i in 0..=n {
-                for j in 0..=n {
-                    let (ln_a, p) = (lo_a + (hi_a - lo_a) * i as f64 / n as f64, lo_p + (hi_p - lo_p) * j as f64 / n as f64);
-                    let c = cost(ln_a, p);
-                    if c < best.2 {
-                        best = (ln_a, p, c);
+        let mut overall = (Falloff { a: 0.0, p: 0.0 }, f64::INFINITY);
+        for sign in [1.0, -1.0] {
+            let (mut lo_a, mut hi_a, mut lo_p, mut hi_p) = (-4.0f64, 6.0f64, -3.0f64, 6.0f64);
+            let mut best = (0.0, 1.0, f64::INFINITY);
+            let n = 40;
+            for _ in 0..6 {
+                for i in 0..=n {
+                    for j in 0..=n {
+                        let (ln_a, p) = (lo_a + (hi_a - lo_a) * i as f64 / n as f64, lo_p + (hi_p - lo_p) * j as f64 / n as f64);
+                        let c = cost(sign * ln_a.exp(), p);
+                        if c < best.2 {
+                            best = (ln_a, p, c);
+                        }
                     }
                 }
+                let (wa, wp) = (0.1 * (hi_a - lo_a), 0.1 * (hi_p - lo_p));
+                (lo_a, hi_a, lo_p, hi_p) = (best.0 - wa, best.0 + wa, best.1 - wp, best.1 + wp);
             }
-            let (wa, wp) = (0.1 * (hi_a - lo_a), 0.1 * (hi_p - lo_p));
-            (lo_a, hi_a, lo_p, hi_p) = (best.0 - wa, best.0 + wa, best.1 - wp, best.1 + wp);
+            if best.2 < overall.1 {
+                overall = (Falloff { a: sign * best.0.exp(), p: best.1 }, best.2);
+            }
         }
-        Falloff { a: best.0.exp(), p: best.1 }
+        overall.0
     }
 
     /// The relative errors |fit / reference − 1| of the samples used.
@@ -354,6 +363,12 @@ mod tests {
         let fit = Falloff::fit(&noisy);
         let worst = fit.errors(&samples).into_iter().fold(0.0, f64::max);
         assert!(worst < 0.01, "noisy fit {fit:?}: worst {worst}");
+        // Convex: fog gathered mostly far away (a < 0).
+        let convex = Falloff { a: -3.0, p: 0.8 };
+        assert!(convex.fraction(0.5, 0.5) < 0.5);
+        let samples: Vec<FalloffSample> = samples.iter().map(|s| FalloffSample { ratio: convex.fraction(s.x, s.theta), ..*s }).collect();
+        let fit = Falloff::fit(&samples);
+        assert!((fit.a / convex.a - 1.0).abs() < 1e-3 && (fit.p - convex.p).abs() < 1e-3, "{fit:?}");
     }
 
     /// The Attenuation table against the quadrature's transmittance of the
