@@ -11,14 +11,14 @@ mod common;
 use common::Family;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
-use sky::render::camera::{direction_deg, Camera};
+use sky::render::camera::direction_deg;
 use sky::render::fog::Fog;
 use sky::render::guide::RayGuide;
 use sky::render::kernel::{Kernel, Scratch};
 use sky::render::rng::Rng;
 use sky::render::single::SingleScattering;
 use sky::render::tracer::{Estimator, Tracer};
-use sky::render::{self, Scene, SingleScatter, SpectralSettings, View, WavelengthSampling};
+use sky::render::{self, Scene, SpectralSettings, View, WavelengthSampling};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -111,21 +111,7 @@ fn the_fogs_first_vertex_matches_the_quadrature() {
 
 /// A view of the directions `dirs` (zenith, azimuth), sun at azimuth 0.
 fn directions(dirs: &[(f64, f64)], sun_zenith_deg: f64, spp: u32, seed: u64, fog: Option<Fog>) -> View {
-    View {
-        camera: Camera::Directions(dirs.to_vec()),
-        width: dirs.len(),
-        height: 1,
-        sun_zenith_deg,
-        sun_azimuth_deg: 0.0,
-        altitude_m: 0.0,
-        spp,
-        seed,
-        estimator: Estimator::Full,
-        sun_disk: false,
-        max_rel_error: None,
-        single_scatter: SingleScatter::Quadrature,
-        fog,
-    }
+    View { fog, ..View::directions(dirs.to_vec(), sun_zenith_deg, 0.0, spp, seed) }
 }
 
 /// The talk's consistency condition, through the whole renderer (hero

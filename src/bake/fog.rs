@@ -21,10 +21,8 @@ use crate::atmosphere::Atmosphere;
 use crate::lut::fog::{fog_texel_view, AttenuationTable, Falloff, FogGeometry};
 use crate::lut::fog_falloff::{study, ErrorSummary};
 use crate::lut::mapping;
-use crate::render::camera::Camera;
 use crate::render::fog::Fog;
-use crate::render::tracer::Estimator;
-use crate::render::{Scene, SingleScatter, SpectralSettings, View};
+use crate::render::{Scene, SpectralSettings, View};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
@@ -82,21 +80,10 @@ pub fn fog_view(sky: &BasisSky, fog: &FogSettings, s: &Sampling, index: usize, r
             })
         })
         .collect();
-    View {
-        camera: Camera::Directions(dirs),
-        width: w,
-        height: h,
-        sun_zenith_deg: mapping::slice_sun_zenith_deg(index, radius_km, top_km),
-        sun_azimuth_deg: 0.0,
-        altitude_m: sky.altitude_m,
-        spp: s.spp,
-        seed: BAKE_SEED,
-        estimator: Estimator::Full,
-        sun_disk: false,
-        max_rel_error: s.max_rel_error,
-        single_scatter: SingleScatter::default(),
-        fog: Some(Fog { max_distance_km: f64::INFINITY, ceiling_km: Some(fog.ceiling_km), shadowed }),
-    }
+    let fog = Fog { max_distance_km: f64::INFINITY, ceiling_km: Some(fog.ceiling_km), shadowed };
+    let sun_zenith_deg = mapping::slice_sun_zenith_deg(index, radius_km, top_km);
+    // A w x h grid of directions (the camera reads pixel y * w + x).
+    View { width: w, height: h, max_rel_error: s.max_rel_error, fog: Some(fog), ..View::directions(dirs, sun_zenith_deg, sky.altitude_m, s.spp, BAKE_SEED) }
 }
 
 /// The cache key of a basis sky's [`FogExtras`].

@@ -192,21 +192,7 @@ pub fn verify(
         let mut errors = Vec::new();
         for ((elev, centre), (both, direction)) in elevations.into_iter().zip(split) {
             on_reference(&sky.name, elev);
-            let view = View {
-                camera: Camera::Directions(dirs.clone()),
-                width: dirs.len(),
-                height: 1,
-                sun_zenith_deg: 90.0 - elev,
-                sun_azimuth_deg: 0.0,
-                altitude_m: sky.altitude_m,
-                spp: opts.spp,
-                seed: REFERENCE_SEED,
-                estimator: Estimator::Full,
-                sun_disk: false,
-                single_scatter: SingleScatter::default(),
-                fog: None,
-                max_rel_error: None,
-            };
+            let view = View::directions(dirs.clone(), 90.0 - elev, sky.altitude_m, opts.spp, REFERENCE_SEED);
             let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
             let sun = direction_deg(90.0 - elev, 0.0);
             let reference: Vec<[f64; 3]> = r.image.pixels.iter().map(|p| p.xyz).collect();

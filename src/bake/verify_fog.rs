@@ -10,10 +10,9 @@ use super::verify::{percentile, REFERENCE_SEED};
 use super::BakeError;
 use crate::lut::decode::{mat_mul, Luts};
 use crate::lut::fog::AttenuationTable;
-use crate::render::camera::{direction_deg, Camera};
+use crate::render::camera::direction_deg;
 use crate::render::fog::Fog;
-use crate::render::tracer::Estimator;
-use crate::render::{SingleScatter, View};
+use crate::render::View;
 use crate::session::Session;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -69,21 +68,8 @@ pub fn verify_fog(luts: &Luts, name: &str, session: &Session, altitude_m: f64, s
     for &sun_elevation in &FOG_SUN_ELEVATIONS_DEG {
         for (k, &depth) in FOG_DEPTHS_KM.iter().enumerate() {
             for shadow in [false, true] {
-                let view = View {
-                    camera: Camera::Directions(dirs.clone()),
-                    width: dirs.len(),
-                    height: 1,
-                    sun_zenith_deg: 90.0 - sun_elevation,
-                    sun_azimuth_deg: 0.0,
-                    altitude_m,
-                    spp,
-                    seed: REFERENCE_SEED,
-                    estimator: Estimator::Full,
-                    sun_disk: false,
-                    max_rel_error: None,
-                    single_scatter: SingleScatter::default(),
-                    fog: Some(Fog { max_distance_km: depth, ceiling_km: Some(entry.ceiling_km), shadowed: shadow }),
-                };
+                let fog = Fog { max_distance_km: depth, ceiling_km: Some(entry.ceiling_km), shadowed: shadow };
+                let view = View { fog: Some(fog), ..View::directions(dirs.clone(), 90.0 - sun_elevation, altitude_m, spp, REFERENCE_SEED) };
                 let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog reference)"), index: usize::MAX, source })?;
                 for (p, &(z, a)) in r.image.pixels.iter().zip(&dirs) {
                     let want = p.xyz[1];

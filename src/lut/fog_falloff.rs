@@ -7,10 +7,8 @@
 //! at every depth, the talk's first attempt).
 
 use super::fog::{falloff_theta, Falloff, FalloffSample, FogGeometry};
-use crate::render::camera::Camera;
 use crate::render::fog::Fog;
-use crate::render::tracer::Estimator;
-use crate::render::{render, RenderError, Scene, SingleScatter, View};
+use crate::render::{render, RenderError, Scene, View};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
@@ -79,21 +77,8 @@ pub fn study(scene: &Scene, geometry: FogGeometry, sun_zenith_degs: &[f64], spp:
             let depth_max = geometry.depth_max_km(elevation_deg);
             let dirs: Vec<(f64, f64)> = AZIMUTHS_DEG.iter().map(|&a| (90.0 - elevation_deg, a)).collect();
             let y_at = |x: f64| -> Result<Vec<f64>, RenderError> {
-                let view = View {
-                    camera: Camera::Directions(dirs.clone()),
-                    width: dirs.len(),
-                    height: 1,
-                    sun_zenith_deg,
-                    sun_azimuth_deg: 0.0,
-                    altitude_m: geometry.observer_altitude_km * 1000.0,
-                    spp,
-                    seed,
-                    estimator: Estimator::Full,
-                    sun_disk: false,
-                    max_rel_error: None,
-                    single_scatter: SingleScatter::Quadrature,
-                    fog: Some(Fog::lit(x * depth_max, Some(geometry.ceiling_km))),
-                };
+                let fog = Fog::lit(x * depth_max, Some(geometry.ceiling_km));
+                let view = View { fog: Some(fog), ..View::directions(dirs.clone(), sun_zenith_deg, geometry.observer_altitude_km * 1000.0, spp, seed) };
                 let image = render(scene, &view, cancel, &|| {})?;
                 on_view();
                 Ok(image.pixels.iter().map(|p| p.xyz[1]).collect())

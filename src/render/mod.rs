@@ -120,6 +120,28 @@ pub struct View {
 }
 
 impl View {
+    /// One row of (zenith, azimuth) directions in degrees from an observer
+    /// at `altitude_m`, the sun at azimuth 0 and its disk hidden, the full
+    /// estimator at a fixed sample count: the reference renders of
+    /// validations and verifiers (the fields are public to change).
+    pub fn directions(dirs: Vec<(f64, f64)>, sun_zenith_deg: f64, altitude_m: f64, spp: u32, seed: u64) -> View {
+        View {
+            width: dirs.len(),
+            height: 1,
+            camera: Camera::Directions(dirs),
+            sun_zenith_deg,
+            sun_azimuth_deg: 0.0,
+            altitude_m,
+            spp,
+            seed,
+            estimator: Estimator::Full,
+            sun_disk: false,
+            max_rel_error: None,
+            single_scatter: SingleScatter::default(),
+            fog: None,
+        }
+    }
+
     /// Unit vector toward the sun.
     pub fn sun_direction(&self) -> DVec3 {
         camera::direction_deg(self.sun_zenith_deg, self.sun_azimuth_deg)
@@ -204,21 +226,7 @@ impl Settings {
     pub fn directions(dirs: Vec<(f64, f64)>, sun_zenith_deg: f64, spectral_nm: Vec<f64>, spp: u32, seed: u64, sun_disk: bool) -> Settings {
         Settings {
             spectral: SpectralSettings { band_nm: 5.0, wavelength_sampling: WavelengthSampling::Luminance, spectral_nm, xyz: false },
-            view: View {
-                width: dirs.len(),
-                height: 1,
-                camera: Camera::Directions(dirs),
-                sun_zenith_deg,
-                sun_azimuth_deg: 0.0,
-                altitude_m: 0.0,
-                spp,
-                seed,
-                estimator: Estimator::Full,
-                sun_disk,
-                max_rel_error: None,
-                single_scatter: SingleScatter::default(),
-                fog: None,
-            },
+            view: View { sun_disk, ..View::directions(dirs, sun_zenith_deg, 0.0, spp, seed) },
         }
     }
 }
