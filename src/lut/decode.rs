@@ -206,6 +206,12 @@ pub(crate) fn read_rgba16f_array(path: &std::path::Path, width: usize, height: u
     Ok(texels.chunks(width * height).map(<[[f32; 3]]>::to_vec).collect())
 }
 
+/// The direction through each pixel centre of a `width` × `height` image
+/// through `camera`, row-major (None outside its view).
+pub fn pixel_directions(camera: &crate::render::camera::Camera, width: usize, height: usize) -> Vec<Option<DVec3>> {
+    (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height)).collect()
+}
+
 pub fn mat_mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
 }
@@ -335,7 +341,7 @@ impl Luts {
         cloudiness: f64,
         sun_disk: bool,
     ) -> Option<Vec<[f64; 3]>> {
-        let dirs: Vec<Option<DVec3>> = (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height)).collect();
+        let dirs = pixel_directions(camera, width, height);
         let mut xyz: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| self.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d))).collect();
         if !sun_disk {
             return Some(xyz);

@@ -149,8 +149,7 @@ impl AttenuationTable {
         for j in 0..ATTENUATION_SIZE {
             for i in 0..ATTENUATION_SIZE {
                 let (depth, elevation) = attenuation_texel(&geometry, i, j);
-                let t = if depth > 0.0 { ss.transmittance_to(direction_deg(90.0 - elevation, 0.0), depth, Some(geometry.ceiling_km)) } else { vec![1.0; scene.band_optics.len()] };
-                xyz.push(weighted(&scene.bands.weight, &t));
+                xyz.push(attenuated_xyz(scene, &ss, &geometry, depth, elevation));
             }
         }
         AttenuationTable { geometry, xyz, unattenuated_xyz: weighted(&scene.bands.weight, &vec![1.0; scene.band_optics.len()]) }
@@ -161,8 +160,8 @@ impl AttenuationTable {
     /// the decoded table is checked against (`bake::verify_fog`).
     pub fn direct_rgb(scene: &Scene, geometry: &FogGeometry, depth_km: f64, elevation_deg: f64, m: &Mat3) -> [f64; 3] {
         let ss = SingleScattering::bands(scene, glam::DVec3::Z, geometry.observer_altitude_km);
-        let t = ss.transmittance_to(direction_deg(90.0 - elevation_deg.clamp(0.0, 90.0), 0.0), depth_km, Some(geometry.ceiling_km));
-        let (xyz, top) = (weighted(&scene.bands.weight, &t), weighted(&scene.bands.weight, &vec![1.0; t.len()]));
+        let xyz = attenuated_xyz(scene, &ss, geometry, depth_km, elevation_deg);
+        let top = weighted(&scene.bands.weight, &vec![1.0; scene.band_optics.len()]);
         super::transmittance::channel_ratio(super::transmittance::mul(m, xyz), super::transmittance::mul(m, top))
     }
 
@@ -179,6 +178,14 @@ impl AttenuationTable {
         let (u, v) = attenuation_uv(&self.geometry, depth_km, elevation_deg);
         bilinear(&self.xyz, ATTENUATION_SIZE, ATTENUATION_SIZE, u, v)
     }
+}
+
+/// The XYZ of the sun's spectrum (the bands' weights) after the low
+/// atmosphere along a view of `elevation_deg` (clamped to the upper
+/// hemisphere) to `depth_km`: a texel of the Attenuation table.
+fn attenuated_xyz(scene: &Scene, ss: &SingleScattering, geometry: &FogGeometry, depth_km: f64, elevation_deg: f64) -> [f64; 3] {
+    let t = if depth_km > 0.0 { ss.transmittance_to(direction_deg(90.0 - elevation_deg.clamp(0.0, 90.0), 0.0), depth_km, Some(geometry.ceiling_km)) } else { vec![1.0; scene.band_optics.len()] };
+    weighted(&scene.bands.weight, &t)
 }
 
 /// Σ_b w_b t_b per channel.

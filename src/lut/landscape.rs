@@ -61,26 +61,24 @@ pub fn decode_landscape(
     let to_sun = crate::render::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
     let to_xyz = |rgb: [f64; 3]| mat_mul(&luts.manifest.colour.xyz_from_rgb, rgb);
     let mut out = Vec::with_capacity(width * height);
-    for y in 0..height {
-        for x in 0..width {
-            let Some(d) = camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height) else {
-                out.push([0.0; 3]);
-                continue;
-            };
-            let elevation = d.z.clamp(-1.0, 1.0).asin().to_degrees();
-            let azimuth = d.y.atan2(d.x).to_degrees();
-            let Some(depth) = ridge_depth_km(elevation, azimuth) else {
-                out.push(luts.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d));
-                continue;
-            };
-            // The slope facing the camera, tilted 30 degrees up.
-            let back = DVec3::new(-d.x, -d.y, 0.0).normalize_or_zero();
-            let n = (back * 30f64.to_radians().cos() + DVec3::Z * 30f64.to_radians().sin()).normalize();
-            let cos_sun = n.dot(to_sun).max(0.0);
-            let object: [f64; 3] = std::array::from_fn(|c| albedo / PI * (sun.irradiance_rgb[c] * cos_sun + ambient.irradiance_up[c]));
-            let fog = luts.fog(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d, depth, cloud_occlusion)?;
-            out.push(to_xyz(std::array::from_fn(|c| object[c] * fog.attenuation_rgb[c] + fog.inscatter_rgb[c])));
-        }
+    for d in super::decode::pixel_directions(camera, width, height) {
+        let Some(d) = d else {
+            out.push([0.0; 3]);
+            continue;
+        };
+        let elevation = d.z.clamp(-1.0, 1.0).asin().to_degrees();
+        let azimuth = d.y.atan2(d.x).to_degrees();
+        let Some(depth) = ridge_depth_km(elevation, azimuth) else {
+            out.push(luts.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d));
+            continue;
+        };
+        // The slope facing the camera, tilted 30 degrees up.
+        let back = DVec3::new(-d.x, -d.y, 0.0).normalize_or_zero();
+        let n = (back * 30f64.to_radians().cos() + DVec3::Z * 30f64.to_radians().sin()).normalize();
+        let cos_sun = n.dot(to_sun).max(0.0);
+        let object: [f64; 3] = std::array::from_fn(|c| albedo / PI * (sun.irradiance_rgb[c] * cos_sun + ambient.irradiance_up[c]));
+        let fog = luts.fog(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d, depth, cloud_occlusion)?;
+        out.push(to_xyz(std::array::from_fn(|c| object[c] * fog.attenuation_rgb[c] + fog.inscatter_rgb[c])));
     }
     Some(out)
 }

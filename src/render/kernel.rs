@@ -23,6 +23,7 @@
 //! `libm` (pure Rust), so the kernel rounds the same on every platform.
 
 use super::guide::{RayGuide, SecondaryScratch};
+use super::medium::depth_of_columns;
 use super::rng::Rng;
 use super::sampling::{cosine_hemisphere, pick_weighted, sample_phase};
 use super::segments::{Boundary, MajorantSegment, EPS_KM};
@@ -230,11 +231,15 @@ impl<'a, const N: usize> Kernel<'a, N> {
         if let Some(c) = h.columns {
             let limit = t_max.is_finite().then_some(t_max);
             match h.column_path(c, p, d, limit) {
-                Some(path) if limit.is_some() && c.path_columns(&path, &h.spectral.extinction).0 > MAX_DIFFERENCED_COLUMN_TAU => {
-                    let tau = self.optical_depth_along(p, d, t_max);
-                    return std::array::from_fn(|k| libm::exp(-tau[k]));
+                Some(path) => {
+                    // Band 0's columns: the conditioning test and its own depth.
+                    let (add, sub) = c.path_columns(&path, &h.spectral.extinction);
+                    if limit.is_some() && add > MAX_DIFFERENCED_COLUMN_TAU {
+                        let tau = self.optical_depth_along(p, d, t_max);
+                        return std::array::from_fn(|k| libm::exp(-tau[k]));
+                    }
+                    return std::array::from_fn(|k| libm::exp(-if k == 0 { depth_of_columns(add, sub) } else { c.path_optical_depth(&path, &self.t[k].spectral.extinction) }));
                 }
-                Some(path) => return std::array::from_fn(|k| libm::exp(-c.path_optical_depth(&path, &self.t[k].spectral.extinction))),
                 None if limit.is_none() => return [0.0; N],
                 None => {}
             }

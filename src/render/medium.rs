@@ -485,10 +485,7 @@ impl ColumnTable {
     /// subtracted, never negative (see [`ColumnPath`]).
     pub fn path_optical_depth(&self, path: &ColumnPath, e: &[f64]) -> f64 {
         let (add, sub) = self.path_columns(path, e);
-        if add.is_infinite() {
-            return f64::INFINITY;
-        }
-        (add - sub).max(0.0)
+        depth_of_columns(add, sub)
     }
 
     /// The optical depths Σ added and Σ subtracted of a path: their sum
@@ -499,6 +496,15 @@ impl ColumnTable {
         let sub: f64 = path.sub[..path.n_sub].iter().map(|n| self.optical_depth_at(n, e)).sum();
         (add, sub)
     }
+}
+
+/// The optical depth of columns Σ added and Σ subtracted (see
+/// [`ColumnTable::path_columns`]): never negative, infinite if a column is.
+pub fn depth_of_columns(add: f64, sub: f64) -> f64 {
+    if add.is_infinite() {
+        return f64::INFINITY;
+    }
+    (add - sub).max(0.0)
 }
 
 /// A position in the column table: altitude node and fraction, angle node
