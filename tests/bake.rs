@@ -171,7 +171,8 @@ fn a_bake_carries_the_fog_luts() {
 }
 
 /// A draft (fixed samples) forecasts its cost from probes before the first
-/// slice, so its ETA does not assume that every sky's texels cost the same.
+/// slice, so its ETA does not assume that every sky's texels cost the same;
+/// the fog slices are in the forecast and the progress.
 #[test]
 fn a_draft_forecasts_its_cost_from_probes() {
     let tmp = tempfile::tempdir().unwrap();
@@ -182,8 +183,17 @@ fn a_draft_forecasts_its_cost_from_probes() {
     let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
     let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
     assert_eq!(forecast["from"], "probes");
-    // 126 distinct slices of 4 x 16 texels at 2 samples.
-    assert_eq!(forecast["samples"], 126 * 64 * 2);
+    // 126 distinct sky slices of 4 x 16 texels and as many fog slices of
+    // 8 x 8 (the Shadowed Fog's renders), all at 2 samples.
+    assert_eq!(forecast["samples"], 126 * 64 * 2 + 126 * 64 * 2);
+    let planned = events.iter().find(|e| e["event"] == "planned").unwrap();
+    assert_eq!((planned["slices_total"].as_u64(), planned["fog_slices"].as_u64()), (Some(2 * 64 + 2 * 64), Some(126)), "{planned}");
+    // The fog slices move the bake's progress: its last event has every texel done.
+    let last = events.iter().rev().find(|e| e["event"] == "progress").unwrap();
+    assert_eq!(last["texels_done"], last["texels_total"], "{last}");
+    // Every sky slice's texels (the two that share a sun are counted as
+    // the one rendered is copied), and the distinct fog slices'.
+    assert_eq!(last["texels_total"], 2 * 64 * 64 + 126 * 64);
     assert!(forecast["core_seconds"].as_f64().unwrap() > 0.0, "{forecast}");
     // It comes before the first slice, and the progress after it has an ETA.
     let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();

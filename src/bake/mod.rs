@@ -29,8 +29,10 @@ use std::sync::Arc;
 #[derive(Debug, Clone, serde::Serialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum BakeEvent {
-    /// The bake's work, once the cache has been consulted.
-    Planned { skies: usize, slices_total: usize, slices_cached: usize, texels_to_render: u64 },
+    /// The bake's work, once the cache has been consulted: slices of the
+    /// sky LUTs and fog slices (each a render of the Shadowed Fog, from
+    /// which the Fog follows), `fog_slices` of the latter to render.
+    Planned { skies: usize, slices_total: usize, slices_cached: usize, fog_slices: usize, texels_to_render: u64 },
     /// A basis sky's optics are being prepared.
     Preparing { sky: String },
     /// What the bake will take, before its first slice: with adaptive
@@ -43,8 +45,8 @@ pub enum BakeEvent {
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
     /// Every slice of a basis sky is done.
     SkyDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64 },
-    /// A slice of a basis sky's Fog or Shadowed Fog LUT is done (`done`
-    /// of `total`, both LUTs counted).
+    /// A fog slice of a basis sky is done: its Fog and Shadowed Fog
+    /// (`done` of `total`, rendered now or found in the cache).
     FogSlice { sky: String, done: usize, total: usize },
     /// Every fog slice of a basis sky is done, with the falloff's fit.
     FogDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64, falloff_a: f64, falloff_p: f64, fit_median: f64, fit_p99: f64 },

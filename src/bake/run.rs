@@ -14,6 +14,7 @@
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BakeFile, BasisSky, Quality, Sampling};
+use super::fog::FogTodo;
 use super::lighting::{lighting_key, SkyLighting};
 use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
 use crate::atmosphere::Atmosphere;
@@ -171,9 +172,6 @@ struct Tracker {
     cores: usize,
     /// Rendering pilots: the farm's progress is not the bake's.
     planning: bool,
-    /// Rendering fog slices: not in the bake's texel count (they report
-    /// their own `FogSlice` events).
-    fog: bool,
     sink: Option<BakeSink>,
 }
 
@@ -373,9 +371,16 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             return Err(BakeError::NotInCache { cache: opts.cache.dir().to_path_buf(), missing });
         }
     }
-    let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum();
-    let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum();
-    let texels_to_render: u64 = plan.iter().map(|p| p.views.iter().flatten().count() as u64 * (p.out.sky.width * p.out.sky.height) as u64).sum();
+    // The fog slices to render (a whole bake's: a part of one packs nothing).
+    let fog_plan: Vec<Vec<FogTodo>> = plan.iter().map(|p| if opts.only.is_some() { Vec::new() } else { super::fog::to_render(&p.out, &bake.fog, &opts.cache, opts.quality) }).collect();
+    let fog_slices = fog_plan.iter().map(Vec::len).sum::<usize>();
+    let fog_texels: u64 = fog_plan.iter().flatten().map(|f| (f.view.width * f.view.height) as u64).sum();
+    // Of the fog, a whole bake's slices; those not rendered count as cached
+    // (a slice that shares its sun with an earlier one among them).
+    let fog_total: usize = if opts.only.is_some() { 0 } else { plan.iter().map(|p| p.out.sky.slices).sum() };
+    let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum::<usize>() + fog_total;
+    let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum::<usize>() + fog_total - fog_slices;
+    let texels_to_render: u64 = plan.iter().map(|p| p.views.iter().flatten().count() as u64 * (p.out.sky.width * p.out.sky.height) as u64).sum::<u64>() + fog_texels;
     let tracker = Arc::new(Mutex::new(Tracker {
         start: Instant::now(),
         texels_total: texels_to_render,
@@ -389,18 +394,17 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         forecast_done: 0.0,
         cores: opts.cores,
         planning: false,
-        fog: false,
         sink: opts.events.clone(),
     }));
-    tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, texels_to_render });
+    tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, fog_slices, texels_to_render });
 
     let optics = OpticsCache::default();
     // Every basis sky's session first (optics prepared once), then, where
     // the quality samples adaptively, every slice's pilot: the forecast
     // behind the ETA, before the first slice is rendered.
     let mut sessions: Vec<Option<Session>> = Vec::new();
-    for p in &plan {
-        if !p.views.iter().any(Option::is_some) {
+    for (p, fog) in plan.iter().zip(&fog_plan) {
+        if !p.views.iter().any(Option::is_some) && fog.is_empty() {
             sessions.push(None);
             continue;
         }
@@ -410,20 +414,24 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
         sessions.push(Some(session));
     }
-    // What the pilots say each slice will cost, core-seconds.
+    // What the pilots say each slice will cost, core-seconds, by slice
+    // index: the sky's and the fog's.
     let mut forecasts: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
-    if plan.iter().flat_map(|p| p.views.iter().flatten()).any(|(v, _)| pilot_view(v).is_some()) {
+    let mut fog_forecasts = forecasts.clone();
+    // Every view to render once, with whether it is a fog slice's.
+    let to_forecast = |k: usize| {
+        let p = &plan[k];
+        let sky = p.views.iter().enumerate().filter(|&(i, _)| p.same_as[i].is_none()).filter_map(|(i, v)| v.as_ref().map(|(v, _)| (i, v, false)));
+        sky.chain(fog_plan[k].iter().map(|f| (f.index, &f.view, true)))
+    };
+    if (0..plan.len()).flat_map(to_forecast).any(|(_, v, _)| pilot_view(v).is_some()) {
         let start = Instant::now();
         tracker.lock().unwrap().planning = true;
         let (mut total, mut samples) = (0.0, 0u64);
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
-            for (index, v) in p.views.iter().enumerate() {
-                let Some((view, _)) = v else { continue };
+            for (index, view, fog) in to_forecast(k) {
                 let Some(pilot) = pilot_view(view) else { continue };
-                if p.same_as[index].is_some() {
-                    continue; // rendered once, under its first index
-                }
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
@@ -441,15 +449,18 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let (_, one_core_s) = timed(&View { spp: 1, ..pilot.clone() })?;
                 let texels = (view.width * view.height) as f64;
                 let per_sample = ((pilot_core_s - one_core_s) / ((ADAPTIVE_PILOT_SPP - 1) as f64 * texels)).max(0.0);
-                let fixed = (one_core_s - texels * per_sample).max(0.0);
+                // A fog slice's Fog is its render plus single scattering by quadrature.
+                let quadrature = if fog { super::fog::time_quadrature(&session.scene, view) } else { 0.0 };
+                let fixed = (one_core_s - texels * per_sample).max(0.0) + quadrature;
                 let planned: u64 = planned_samples(view, &image).iter().map(|&n| n as u64).sum();
-                forecasts[k][index] = fixed + planned as f64 * per_sample;
-                total += forecasts[k][index];
+                let f = if fog { &mut fog_forecasts[k][index] } else { &mut forecasts[k][index] };
+                *f = fixed + planned as f64 * per_sample;
+                total += *f;
                 samples += planned;
             }
         }
         tracker.lock().unwrap().forecast("pilots", start, total, samples);
-    } else if plan.iter().map(|p| p.views.iter().flatten().count()).sum::<usize>() >= MIN_SLICES_TO_PROBE {
+    } else if (0..plan.len()).flat_map(to_forecast).count() >= MIN_SLICES_TO_PROBE {
         // A fixed sample count (a draft): every texel takes the same
         // samples, but a texel's cost differs from sky to sky (a cloudy
         // texel costs 6 times a clear one) and with the sun (twilight paths
@@ -462,42 +473,54 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             let sky = &p.out.sky;
-            let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
-            for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
-                if cancel.load(Ordering::SeqCst) {
-                    return Err(BakeError::Cancelled);
-                }
-                tracker.lock().unwrap().current = (sky.name.clone(), index);
-                let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
-                let probe = View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full };
-                // Rendered here, on this process's threads, in one piece: on
-                // the farm a probe's few columns would go out as several
-                // small tasks, each preparing the tracers and guides of its
-                // sun again, a cost the slices' large tasks spread thin (the
-                // forecast came out 43 % high). The rest of a render's cost
-                // per render, not per texel, a one-texel render of the same
-                // view measures.
-                let threads = rayon::current_num_threads() as f64;
-                let timed = |v: &View| -> Result<f64, BakeError> {
-                    let t = Instant::now();
-                    crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
-                    Ok(t.elapsed().as_secs_f64() * threads)
-                };
-                let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
-                let texels = (probe.width * probe.height) as f64;
-                let whole = timed(&probe)?;
-                per_slice_fixed.push((index, fixed));
-                per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
-            }
-            for (index, v) in p.views.iter().enumerate() {
-                let Some((view, _)) = v else { continue };
-                if p.same_as[index].is_some() {
+            // The sky's probes, then the fog's: a fog slice's probe is the
+            // Fog LUT's directions at a quarter of its size each way, and
+            // its texels' cost adds the quadrature's.
+            for fog in [false, true] {
+                if (fog && fog_plan[k].is_empty()) || (!fog && !p.views.iter().any(Option::is_some)) {
                     continue;
                 }
-                let texels = (view.width * view.height) as f64;
-                forecasts[k][index] = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
-                total += forecasts[k][index];
-                samples += texels as u64 * view.spp as u64;
+                let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
+                for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
+                    if cancel.load(Ordering::SeqCst) {
+                        return Err(BakeError::Cancelled);
+                    }
+                    tracker.lock().unwrap().current = (sky.name.clone(), index);
+                    let probe = if fog {
+                        let f = &bake.fog;
+                        let smaller = super::file::FogSettings { width: (f.width / PROBE_STRIDE).max(1), height: (f.height / PROBE_STRIDE).max(1), ..*f };
+                        super::fog::fog_view(sky, &smaller, &p.out.sampling, index, p.out.radius_km, p.out.top_km, true)
+                    } else {
+                        let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
+                        View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full }
+                    };
+                    // Rendered here, on this process's threads, in one piece: on
+                    // the farm a probe's few columns would go out as several
+                    // small tasks, each preparing the tracers and guides of its
+                    // sun again, a cost the slices' large tasks spread thin (the
+                    // forecast came out 43 % high). The rest of a render's cost
+                    // per render, not per texel, a one-texel render of the same
+                    // view measures.
+                    let threads = rayon::current_num_threads() as f64;
+                    let timed = |v: &View| -> Result<f64, BakeError> {
+                        let t = Instant::now();
+                        crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+                        Ok(t.elapsed().as_secs_f64() * threads)
+                    };
+                    let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
+                    let texels = (probe.width * probe.height) as f64;
+                    let whole = timed(&probe)?;
+                    let quadrature = if fog { super::fog::time_quadrature(&session.scene, &probe) / texels } else { 0.0 };
+                    per_slice_fixed.push((index, fixed));
+                    per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0) + quadrature));
+                }
+                for (index, view, is_fog) in to_forecast(k).filter(|v| v.2 == fog) {
+                    let texels = (view.width * view.height) as f64;
+                    let f = if is_fog { &mut fog_forecasts[k][index] } else { &mut forecasts[k][index] };
+                    *f = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
+                    total += *f;
+                    samples += texels as u64 * view.spp as u64;
+                }
             }
         }
         tracker.lock().unwrap().forecast("probes", start, total, samples);
@@ -604,14 +627,20 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let s = session.as_ref().unwrap_or_else(|| {
                     made.get_or_init(|| Session::new(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {}))
                 });
-                {
-                    let mut t = tracker.lock().unwrap();
-                    t.current = (format!("{name} (fog)"), index);
-                    t.fog = true;
-                }
-                let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source });
-                tracker.lock().unwrap().fog = false;
-                r.map(|r| r.image)
+                // The slice is the bake's current job: its farm progress moves
+                // the bake's, through the slice's forecast.
+                let forecast = fog_forecasts[k][index];
+                tracker.lock().unwrap().job =
+                    Some(StripJob { sky: format!("{name} (fog)"), indices: vec![index], slice_width: view.width, height: view.height, cumulative_forecast: vec![0.0, forecast] });
+                let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source })?;
+                let mut t = tracker.lock().unwrap();
+                t.job = None;
+                t.texels_before += (view.width * view.height) as u64;
+                t.slices_done += 1;
+                t.forecast_done += forecast;
+                let p = t.progress(0, None);
+                t.emit(BakeEvent::Progress(p));
+                Ok(r.image)
             };
             let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &render, &on_slice)?;
             tracker.lock().unwrap().emit(BakeEvent::FogDone {
@@ -643,7 +672,7 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
     farm.events = Some(EventSink::new(move |e| {
         let mut t = t.lock().unwrap();
         match e {
-            FarmEvent::Progress(_) if t.planning || t.fog => {}
+            FarmEvent::Progress(_) if t.planning => {}
             FarmEvent::Progress(p) => {
                 let p = t.progress(p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));

@@ -91,8 +91,10 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
             None => eprintln!("{text}"),
         };
         match e {
-            BakeEvent::Planned { skies, slices_total, slices_cached, texels_to_render } => {
-                say(format!("sky bake-luts: {skies} basis skies, {slices_total} slices, {slices_cached} in the cache, {texels_to_render} texels to render"));
+            BakeEvent::Planned { skies, slices_total, slices_cached, fog_slices, texels_to_render } => {
+                say(format!(
+                    "sky bake-luts: {skies} basis skies, {slices_total} slices ({fog_slices} of them fog slices to render), {slices_cached} in the cache, {texels_to_render} texels to render"
+                ));
                 if style == Style::Bars && *texels_to_render > 0 {
                     let b = ProgressBar::new(*texels_to_render);
                     b.set_style(ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} texels  {msg}").unwrap());

@@ -368,6 +368,27 @@ impl<'a> PixelTracers<'a> {
     }
 }
 
+/// The single scattering of sunlight toward the camera along `dir` by
+/// deterministic quadrature over every band and spectral line
+/// (`single::SingleScattering`), as view `s` sees it: the sky's, or with a
+/// fog the light scattered once by the fog's air. What
+/// [`render_pixel`] adds to every sample where
+/// [`View::single_by_quadrature`] holds; so a Fog LUT texel is its Shadowed
+/// Fog texel (the same paths, which skip the first vertex's sun) plus this.
+pub fn single_by_quadrature(scene: &Scene, s: &View, dir: DVec3) -> ([f64; 3], Vec<f64>) {
+    let (sun, alt_km) = (s.sun_direction(), s.altitude_m / 1000.0);
+    let nl = scene.line_optics.len();
+    let (bands, lines) = (single::SingleScattering::bands(scene, sun, alt_km), single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km));
+    let w = &scene.bands.weight;
+    match s.fog {
+        Some(f) => (
+            if scene.spectral.xyz { bands.fog_xyz(w, dir, f.max_distance_km, f.ceiling_km) } else { [0.0; 3] },
+            if nl > 0 { lines.radiance_to(dir, f.max_distance_km, f.ceiling_km) } else { Vec::new() },
+        ),
+        None => (if scene.spectral.xyz { bands.xyz(w, dir) } else { [0.0; 3] }, if nl > 0 { lines.radiance(dir) } else { Vec::new() }),
+    }
+}
+
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
 pub fn render_pixel(scene: &Scene, s: &View, pixel: usize) -> PixelResult {
@@ -406,18 +427,7 @@ pub fn render_pixel_with(tracers: &PixelTracers, scene: &Scene, s: &View, pixel:
     // every sample of the pixel, so it is added to each, and the moments
     // measure the noise of the rest.
     let (single_xyz, single_lines) = match centre {
-        Some(c) if s.single_by_quadrature() && !s.fog.is_some_and(|f| f.shadowed) => {
-            let (sun, alt_km) = (s.sun_direction(), s.altitude_m / 1000.0);
-            let (bands, lines) = (single::SingleScattering::bands(scene, sun, alt_km), single::SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, alt_km));
-            let w = &scene.bands.weight;
-            match s.fog {
-                Some(f) => (
-                    if scene.spectral.xyz { bands.fog_xyz(w, c, f.max_distance_km, f.ceiling_km) } else { [0.0; 3] },
-                    if nl > 0 { lines.radiance_to(c, f.max_distance_km, f.ceiling_km) } else { Vec::new() },
-                ),
-                None => (if scene.spectral.xyz { bands.xyz(w, c) } else { [0.0; 3] }, if nl > 0 { lines.radiance(c) } else { Vec::new() }),
-            }
-        }
+        Some(c) if s.single_by_quadrature() && !s.fog.is_some_and(|f| f.shadowed) => single_by_quadrature(scene, s, c),
         _ => ([0.0; 3], vec![0.0; nl]),
     };
     // Band choice and pixel jitter follow low-discrepancy sequences over the
