@@ -44,18 +44,19 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
     let job = tmp.path().join("job");
     let plan = run(&mut sky(&["bake-luts", s(&bake), "--out", s(&job), "--plan", "openjd", "--json"]));
     let summary: serde_json::Value = serde_json::from_slice(&plan.stdout).unwrap();
-    assert_eq!(summary["render_tasks"], 128);
+    // Each sky's 64 slices and 64 fog slices.
+    assert_eq!(summary["render_tasks"], 256);
     let template = job.join("bake.openjd.yaml");
     let params = job.join("bake.openjd.params.json");
     // The plan renders nothing.
     assert!(!job.join("manifest.json").exists());
     let text = std::fs::read_to_string(&template).unwrap();
-    assert!(text.contains("\"clear:0\"") && text.contains("\"hazed:63\""), "{text}");
+    assert!(text.contains("\"clear:0\"") && text.contains("\"hazed:63\"") && text.contains("\"hazed:fog:63\""), "{text}");
 
     run(Command::new(openjd()).arg("check").arg(&template));
     let log = run(Command::new(openjd()).arg("run").arg(&template).arg("-p").arg(format!("file://{}", s(&params))).args(["--step", "Pack", "--run-dependencies"]));
     let log = String::from_utf8_lossy(&log.stdout);
-    assert!(log.contains("Chunks run: 129"), "128 render tasks and the pack step:\n{log}");
+    assert!(log.contains("Chunks run: 257"), "256 render tasks and the pack step:\n{log}");
 
     let direct = tmp.path().join("direct");
     run(&mut sky(&["bake-luts", s(&bake), "--out", s(&direct)]));
@@ -64,10 +65,8 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
         assert!(a == b, "{f}: the job's file differs from the direct bake's");
     }
 
-    // The pack step renders no sky slice: a sky slice lost from the cache
-    // is an error that names it, and nothing is written. (The fog LUTs'
-    // slices have no render tasks of their own yet: the pack step renders
-    // them, into the same cache.)
+    // The pack step renders nothing: a sky slice lost from the cache is an
+    // error that names it, and nothing is written; so is a fog slice.
     let cache = job.join("cache");
     let cached = sky::bake::SliceCache::open(&cache).unwrap();
     let first = std::fs::read_dir(&cache)
@@ -87,6 +86,16 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
         err.contains("lacks 1 of the bake's slices") || err.contains("lacks 2 of the bake's slices (clear:47, clear:48)") || err.contains("lacks 2 of the bake's slices (hazed:47, hazed:48)"),
         "{err}"
     );
+    assert!(!again.join("manifest.json").exists());
+    for p in std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "slice")) {
+        if cached.get(p.file_stem().unwrap().to_str().unwrap()).is_some_and(|s| s.width == 8) {
+            std::fs::remove_file(p).unwrap();
+        }
+    }
+    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"]).env("SKY_CACHE_DIR", "off").output().unwrap();
+    assert_eq!(o.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("clear:fog:0, clear:fog:1"), "{err}");
     assert!(!again.join("manifest.json").exists());
 }
 

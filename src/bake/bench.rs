@@ -26,7 +26,7 @@
 //! measured slices (constant beyond them), and scaled to the full slice
 //! size.
 
-use super::file::{BakeFile, BasisSky, Quality};
+use super::file::{BakeFile, BasisSky, FogSettings, Quality};
 use super::run::spectral_settings;
 use crate::atmosphere::Atmosphere;
 use crate::lut::mapping::{self, DirectionMapping};
@@ -59,6 +59,10 @@ pub struct BenchOptions {
     pub methods: Vec<SingleScatter>,
     /// Threads of the renders (core-seconds are wall seconds times this).
     pub threads: usize,
+    /// Measure the fog slices (the bake file's `[fog]`: their render is the
+    /// Shadowed Fog, and the Fog's quadrature is priced per texel) instead
+    /// of the sky's.
+    pub fog: bool,
 }
 
 /// One estimator on one slice.
@@ -125,8 +129,15 @@ pub enum BenchError {
 }
 
 /// The measured slice's view: the sky's LUT mapping at `sun_zenith_deg`,
-/// every `stride`-th texel (at the subset's own texel centres).
-fn view(sky: &BasisSky, sun_zenith_deg: f64, stride: usize, spp: u32, seed: u64, method: SingleScatter) -> View {
+/// every `stride`-th texel (at the subset's own texel centres); with `fog`,
+/// the Fog LUT's directions at a `stride`-th of its size each way, the
+/// fog slice's render (the Shadowed Fog: it has no single scattering of
+/// sunlight, so `method` changes nothing there).
+fn view(sky: &BasisSky, fog: Option<&FogSettings>, sun_zenith_deg: f64, stride: usize, spp: u32, seed: u64, method: SingleScatter) -> View {
+    if let Some(f) = fog {
+        let subset = FogSettings { width: (f.width / stride).max(1), height: (f.height / stride).max(1), ..*f };
+        return View { seed, single_scatter: method, ..super::fog::fog_view_at(sky, &subset, spp, sun_zenith_deg, true) };
+    }
     View {
         camera: Camera::Lut { mapping: DirectionMapping::new(sun_zenith_deg, sky.threshold_deg), sun_azimuth_deg: 0.0 },
         width: (sky.width / stride).max(1),
@@ -154,6 +165,7 @@ fn timed(pool: &rayon::ThreadPool, threads: usize, scene: &Scene, view: &View, c
 /// One estimator on one slice, against its reference.
 fn measure(
     sky: &BasisSky,
+    fog: Option<&FogSettings>,
     sun_zenith_deg: f64,
     method: SingleScatter,
     reference: &Image,
@@ -163,8 +175,11 @@ fn measure(
     cap: u32,
     cancel: &AtomicBool,
 ) -> Result<SliceCost, BenchError> {
-    let (img, core_seconds) = timed(pool, o.threads, scene, &view(sky, sun_zenith_deg, o.stride, o.spp, MEASURED_SEED, method), cancel)?;
-    let (_, one_core_seconds) = timed(pool, o.threads, scene, &view(sky, sun_zenith_deg, o.stride, 1, MEASURED_SEED, method), cancel)?;
+    let measured = view(sky, fog, sun_zenith_deg, o.stride, o.spp, MEASURED_SEED, method);
+    let (img, core_seconds) = timed(pool, o.threads, scene, &measured, cancel)?;
+    let (_, one_core_seconds) = timed(pool, o.threads, scene, &view(sky, fog, sun_zenith_deg, o.stride, 1, MEASURED_SEED, method), cancel)?;
+    // A fog slice's Fog: its render plus the quadrature, per texel.
+    let quadrature = if fog.is_some() { pool.install(|| super::fog::time_quadrature(scene, &measured)) } else { 0.0 };
     let n = o.spp as f64;
     let (mut e2, mut s2, mut own, mut own_each) = (0.0, 0.0, 0.0, Vec::new());
     let mut ref_rel = Vec::new();
@@ -191,7 +206,7 @@ fn measure(
     let kappa = if rel_var_own > 0.0 { rel_var_vs_reference / rel_var_own } else { 1.0 };
     let subset = (img.width * img.height) as f64;
     let core_seconds_per_path = ((core_seconds - one_core_seconds) / (subset * (n - 1.0))).max(0.0);
-    let overhead = (one_core_seconds / subset - core_seconds_per_path).max(0.0);
+    let overhead = (one_core_seconds / subset - core_seconds_per_path).max(0.0) + quadrature / subset;
     let target2 = TARGET_REL_ERROR * TARGET_REL_ERROR;
     let (mut samples, mut uncapped, mut capped) = (0.0, 0.0, 0usize);
     // As `adaptive_samples` counts them: the pilot, then the estimate's
@@ -206,7 +221,7 @@ fn measure(
     }
     let samples_to_target = uncapped / m;
     let samples_capped = samples / m;
-    let full = (sky.width * sky.height) as f64;
+    let full = fog.map_or(sky.width * sky.height, |f| f.width * f.height) as f64;
     ref_rel.sort_by(f64::total_cmp);
     Ok(SliceCost {
         sky: sky.name.clone(),
@@ -262,9 +277,10 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
         let scene = Scene::new(&atm, &spectral_settings(&final_), mie, &|| {});
         let mut per_method: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); o.methods.len()];
         for &z in &zeniths {
-            let (reference, _) = timed(&pool, o.threads, &scene, &view(sky, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature), cancel)?;
+            let fog = o.fog.then_some(&bake.fog);
+            let (reference, _) = timed(&pool, o.threads, &scene, &view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature), cancel)?;
             for (k, &method) in o.methods.iter().enumerate() {
-                let c = measure(sky, z, method, &reference, o, &scene, &pool, cap, cancel)?;
+                let c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;
                 on_slice(&c);
                 per_method[k].push((z, c.slice_core_seconds_to_target, c.slice_core_seconds_capped));
                 report.slices.push(c);

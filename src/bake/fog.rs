@@ -71,6 +71,13 @@ pub struct SkyFog {
 /// `shadowed`): the Fog LUT's texel directions, the slice's sun, the fog
 /// to the ceiling.
 pub fn fog_view(sky: &BasisSky, fog: &FogSettings, s: &Sampling, index: usize, radius_km: f64, top_km: f64, shadowed: bool) -> View {
+    let sun_zenith_deg = mapping::slice_sun_zenith_deg(index, radius_km, top_km);
+    View { max_rel_error: s.max_rel_error, ..fog_view_at(sky, fog, s.spp, sun_zenith_deg, shadowed) }
+}
+
+/// The Fog LUT's texel directions (`fog`'s size) at any sun, fixed at
+/// `spp` samples: a fog slice's view, and the benchmark's.
+pub fn fog_view_at(sky: &BasisSky, fog: &FogSettings, spp: u32, sun_zenith_deg: f64, shadowed: bool) -> View {
     let (w, h) = (fog.width, fog.height);
     let dirs = (0..h)
         .flat_map(|j| {
@@ -81,9 +88,8 @@ pub fn fog_view(sky: &BasisSky, fog: &FogSettings, s: &Sampling, index: usize, r
         })
         .collect();
     let fog = Fog { max_distance_km: f64::INFINITY, ceiling_km: Some(fog.ceiling_km), shadowed };
-    let sun_zenith_deg = mapping::slice_sun_zenith_deg(index, radius_km, top_km);
     // A w x h grid of directions (the camera reads pixel y * w + x).
-    View { width: w, height: h, max_rel_error: s.max_rel_error, fog: Some(fog), ..View::directions(dirs, sun_zenith_deg, sky.altitude_m, s.spp, BAKE_SEED) }
+    View { width: w, height: h, fog: Some(fog), ..View::directions(dirs, sun_zenith_deg, sky.altitude_m, spp, BAKE_SEED) }
 }
 
 /// The view of fog slice `index`'s render (its Shadowed Fog) and its cache key.

@@ -116,7 +116,7 @@ pub enum BakeError {
     NotFinite { sky: String, index: usize, u: usize, v: usize, what: &'static str },
     #[error("cannot write the bake: {0}")]
     Write(String),
-    #[error("--pack-only: the cache {} lacks {} of the bake's slices ({}{}); render them first (--slice NAME:INDEX, or a bake without --pack-only)", cache.display(), missing.len(), missing.iter().take(8).cloned().collect::<Vec<_>>().join(", "), if missing.len() > 8 { ", ..." } else { "" })]
+    #[error("--pack-only: the cache {} lacks {} of the bake's slices ({}{}); render them first (--slice NAME:INDEX or NAME:fog:INDEX, or a bake without --pack-only)", cache.display(), missing.len(), missing.iter().take(8).cloned().collect::<Vec<_>>().join(", "), if missing.len() > 8 { ", ..." } else { "" })]
     NotInCache { cache: std::path::PathBuf, missing: Vec<String> },
     #[error("bake cancelled")]
     Cancelled,

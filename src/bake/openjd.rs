@@ -4,12 +4,15 @@
 //! studios whose farm manager already runs their renders.
 //!
 //! The template has two steps:
-//! - `Render`: one task per (basis sky, slice), a STRING task parameter
-//!   `Slice` ranging over `NAME:INDEX`, each running `sky bake-luts BAKE
-//!   --slice NAME:INDEX` into the shared content-addressed slice cache;
+//! - `Render`: one task per (basis sky, slice) and one per (basis sky, fog
+//!   slice), a STRING task parameter `Slice` ranging over `NAME:INDEX` and
+//!   `NAME:fog:INDEX`, each running `sky bake-luts BAKE --slice SLICE` into
+//!   the shared content-addressed slice cache;
 //! - `Pack`: depends on `Render` and runs `sky bake-luts BAKE
 //!   --pack-only`, which packs the cached slices and fails, naming them, if
-//!   any is missing (it never renders, so a lost task cannot hide in it).
+//!   any is missing (it renders no slice, so a lost task cannot hide in it;
+//!   it does compute each sky's Fog from its Shadowed Fog by quadrature,
+//!   and the fog falloff's fit, whose reference renders are seconds).
 //!
 //! The files a job packs are byte-identical to a direct `sky bake-luts` of
 //! the same bake: a slice's cache key and its render do not depend on
@@ -71,16 +74,24 @@ fn list(items: impl IntoIterator<Item = String>) -> String {
     format!("[{}]", items.into_iter().collect::<Vec<_>>().join(", "))
 }
 
+/// The render tasks of `bake`, as `--slice` values: every basis sky's
+/// slices, then its fog slices (see [`SliceId`](super::SliceId)).
+pub fn render_tasks(bake: &BakeFile) -> Vec<String> {
+    let sky = bake.skies.iter().flat_map(|s| (0..s.slices).map(move |i| format!("{}:{i}", s.name)));
+    let fog = bake.skies.iter().flat_map(|s| (0..s.slices).map(move |i| format!("{}:fog:{i}", s.name)));
+    sky.chain(fog).collect()
+}
+
 /// The job template of `bake` (see the module documentation).
 pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String {
-    let slices = bake.skies.iter().flat_map(|s| (0..s.slices).map(move |i| q(&format!("{}:{i}", s.name))));
+    let slices = render_tasks(bake).into_iter().map(|t| q(&t));
     let common = ["{{Param.BakeFile}}", "--out", "{{Param.OutDir}}", "--cache", "{{Param.CacheDir}}", "--quality", "{{Param.Quality}}"];
     let args = |extra: &[&str]| list(["bake-luts"].iter().chain(common.iter()).chain(extra.iter()).map(|a| q(a)));
     let mut t = String::new();
     let w = &mut t;
     // `write!` to a String cannot fail.
     let _ = writeln!(w, "# An Open Job Description job template written by `sky bake-luts --plan openjd` (sky {}).", env!("CARGO_PKG_VERSION"));
-    let _ = writeln!(w, "# Render: one task per (basis sky, slice) into the shared slice cache; Pack: the LUT files and");
+    let _ = writeln!(w, "# Render: one task per (basis sky, slice) and per fog slice into the shared slice cache; Pack: the LUT files and");
     let _ = writeln!(w, "# manifest.json from the cache, after every Render task. Check it with `openjd check`, run it");
     let _ = writeln!(w, "# locally with `openjd run {TEMPLATE_FILE} --step Pack --run-dependencies`, or submit it to a farm");
     let _ = writeln!(w, "# manager that reads Open Job Description (AWS Deadline Cloud). Relative paths are relative to");
@@ -146,7 +157,8 @@ mod tests {
         let t = job_template(&bake, "sky bake-luts bake", &d);
         assert!(t.contains("specificationVersion: \"jobtemplate-2023-09\""), "{t}");
         assert!(t.contains("\"clear:0\", \"clear:1\""), "{t}");
-        assert!(t.contains("\"clear:63\", \"hazed:0\"") && t.contains("\"hazed:63\"]"), "{t}");
+        assert!(t.contains("\"clear:63\", \"hazed:0\"") && t.contains("\"hazed:63\", \"clear:fog:0\""), "{t}");
+        assert!(t.contains("\"hazed:fog:62\", \"hazed:fog:63\"]"), "{t}");
         assert!(t.contains("default: \"/opt/sky: {bin}/sky\""), "{t}");
         assert!(t.contains("default: \"final\"") && t.contains("default: \"acescg\""), "{t}");
         assert!(t.contains("\"--slice\", \"{{Task.Param.Slice}}\""), "{t}");

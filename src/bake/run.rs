@@ -37,28 +37,34 @@ use std::time::Instant;
 /// flicker as a runtime interpolates from one slice to the next.
 pub const BAKE_SEED: u64 = 0x5eed_5107;
 
-/// One slice of a bake: `NAME:INDEX` (`--slice clear:12`).
+/// One slice of a bake: `NAME:INDEX` (`--slice clear:12`), or a fog
+/// slice, `NAME:fog:INDEX` (its render: the Shadowed Fog's).
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
 pub struct SliceId {
     pub sky: String,
     pub index: usize,
+    pub fog: bool,
 }
 
 impl std::str::FromStr for SliceId {
     type Err = String;
     fn from_str(s: &str) -> Result<SliceId, String> {
-        let (sky, index) = s.rsplit_once(':').ok_or_else(|| format!("{s:?}: expected NAME:INDEX, e.g. clear:12"))?;
+        let (sky, index) = s.rsplit_once(':').ok_or_else(|| format!("{s:?}: expected NAME:INDEX or NAME:fog:INDEX, e.g. clear:12"))?;
         let index: usize = index.parse().map_err(|_| format!("{s:?}: the slice index must be a whole number from 0 to {}", mapping::SLICES - 1))?;
+        let (sky, fog) = match sky.strip_suffix(":fog") {
+            Some(sky) => (sky, true),
+            None => (sky, false),
+        };
         if index >= mapping::SLICES || sky.is_empty() {
-            return Err(format!("{s:?}: expected NAME:INDEX with INDEX from 0 to {}", mapping::SLICES - 1));
+            return Err(format!("{s:?}: expected NAME:INDEX or NAME:fog:INDEX with INDEX from 0 to {}", mapping::SLICES - 1));
         }
-        Ok(SliceId { sky: sky.to_string(), index })
+        Ok(SliceId { sky: sky.to_string(), index, fog })
     }
 }
 
 impl std::fmt::Display for SliceId {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}:{}", self.sky, self.index)
+        write!(f, "{}:{}{}", self.sky, if self.fog { "fog:" } else { "" }, self.index)
     }
 }
 
@@ -332,7 +338,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let mut slices = Vec::new();
         let mut cached = 0;
         for index in 0..sky.slices {
-            let wanted = opts.only.as_ref().is_none_or(|o| o.iter().any(|id| id.sky == sky.name && id.index == index));
+            let wanted = opts.only.as_ref().is_none_or(|o| o.iter().any(|id| !id.fog && id.sky == sky.name && id.index == index));
             if !wanted {
                 views.push(None);
                 same_as.push(None);
@@ -365,21 +371,35 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         };
         plan.push(Planned { atm, bundle, out, views, same_as });
     }
+    // The fog slices to render: a whole bake's, or those `only` names.
+    let fog_plan: Vec<Vec<FogTodo>> = plan
+        .iter()
+        .map(|p| {
+            let mut todo = super::fog::to_render(&p.out, &bake.fog, &opts.cache, opts.quality);
+            if let Some(only) = &opts.only {
+                todo.retain(|f| only.iter().any(|id| id.fog && id.sky == p.out.sky.name && id.index == f.index));
+            }
+            todo
+        })
+        .collect();
     if opts.pack_only {
-        let missing: Vec<String> = plan.iter().flat_map(|p| p.views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(i, _)| format!("{}:{i}", p.out.sky.name))).collect();
+        let sky_missing = plan.iter().flat_map(|p| p.views.iter().enumerate().filter(|(_, v)| v.is_some()).map(|(i, _)| format!("{}:{i}", p.out.sky.name)));
+        let fog_missing = plan.iter().zip(&fog_plan).flat_map(|(p, f)| f.iter().map(|f| format!("{}:fog:{}", p.out.sky.name, f.index)));
+        let missing: Vec<String> = sky_missing.chain(fog_missing).collect();
         if !missing.is_empty() {
             return Err(BakeError::NotInCache { cache: opts.cache.dir().to_path_buf(), missing });
         }
     }
-    // The fog slices to render (a whole bake's: a part of one packs nothing).
-    let fog_plan: Vec<Vec<FogTodo>> = plan.iter().map(|p| if opts.only.is_some() { Vec::new() } else { super::fog::to_render(&p.out, &bake.fog, &opts.cache, opts.quality) }).collect();
     let fog_slices = fog_plan.iter().map(Vec::len).sum::<usize>();
     let fog_texels: u64 = fog_plan.iter().flatten().map(|f| (f.view.width * f.view.height) as u64).sum();
     // Of the fog, a whole bake's slices; those not rendered count as cached
     // (a slice that shares its sun with an earlier one among them).
-    let fog_total: usize = if opts.only.is_some() { 0 } else { plan.iter().map(|p| p.out.sky.slices).sum() };
+    let fog_total: usize = match &opts.only {
+        Some(only) => only.iter().filter(|id| id.fog).count(),
+        None => plan.iter().map(|p| p.out.sky.slices).sum(),
+    };
     let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum::<usize>() + fog_total;
-    let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum::<usize>() + fog_total - fog_slices;
+    let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum::<usize>() + fog_total.saturating_sub(fog_slices);
     let texels_to_render: u64 = plan.iter().map(|p| p.views.iter().flatten().count() as u64 * (p.out.sky.width * p.out.sky.height) as u64).sum::<u64>() + fog_texels;
     let tracker = Arc::new(Mutex::new(Tracker {
         start: Instant::now(),
@@ -616,9 +636,10 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 }
             };
         }
-        if opts.only.is_none() {
+        if opts.only.is_none() || !fog_plan[k].is_empty() {
             // The global-fog LUTs, through the sky's session (the same
-            // workers; one made now if every sky slice was cached).
+            // workers; one made now if every sky slice was cached): a whole
+            // bake's, or the fog slices `only` names, into the cache.
             let scene = optics.get(&atms[k], &out.spectral, mie, &|| {});
             let job = super::fog::FogJob { sky: &out.sky, atmosphere: &atms[k], scene: &scene, sampling: &out.sampling, settings: bake.fog, quality: opts.quality };
             let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
@@ -642,18 +663,29 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 t.emit(BakeEvent::Progress(p));
                 Ok(r.image)
             };
-            let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &render, &on_slice)?;
-            tracker.lock().unwrap().emit(BakeEvent::FogDone {
-                sky: name.clone(),
-                slices_rendered: fog.rendered,
-                slices_cached: fog.cached,
-                core_seconds: fog.core_seconds,
-                falloff_a: fog.extras.falloff.a,
-                falloff_p: fog.extras.falloff.p,
-                fit_median: fog.extras.fit_error.median,
-                fit_p99: fog.extras.fit_error.p99,
-            });
-            out.fog = Some(fog);
+            if opts.only.is_some() {
+                let threads = rayon::current_num_threads() as f64;
+                for f in &fog_plan[k] {
+                    let start = Instant::now();
+                    let image = render(&f.view, f.index)?;
+                    let slice = slice_of_image(&image, &f.view, &format!("{name} (shadowed fog)"), f.index, start.elapsed().as_secs_f64() * threads)?;
+                    opts.cache.put(&f.key, &slice)?;
+                    on_slice(f.index, out.sky.slices);
+                }
+            } else {
+                let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &render, &on_slice)?;
+                tracker.lock().unwrap().emit(BakeEvent::FogDone {
+                    sky: name.clone(),
+                    slices_rendered: fog.rendered,
+                    slices_cached: fog.cached,
+                    core_seconds: fog.core_seconds,
+                    falloff_a: fog.extras.falloff.a,
+                    falloff_p: fog.extras.falloff.p,
+                    fit_median: fog.extras.fit_error.median,
+                    fit_p99: fog.extras.fit_error.p99,
+                });
+                out.fog = Some(fog);
+            }
         }
         if out.slices.iter().any(Option::is_some) {
             tracker.lock().unwrap().emit(BakeEvent::SkyDone { sky: name, slices_rendered: out.rendered, slices_cached: out.cached, core_seconds: sky_core_seconds });

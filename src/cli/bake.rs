@@ -36,10 +36,10 @@ pub struct BakeArgs {
     /// The slice cache (default: OUT/cache)
     #[arg(long, value_name = "DIR")]
     cache: Option<PathBuf>,
-    /// Only these slices, NAME:INDEX (repeatable or comma-separated), into the cache; nothing is packed
+    /// Only these slices, NAME:INDEX or a fog slice NAME:fog:INDEX (repeatable or comma-separated), into the cache; nothing is packed
     #[arg(long, value_delimiter = ',', value_name = "NAME:INDEX")]
     slice: Vec<SliceId>,
-    /// Pack the cached slices only: render nothing, and fail naming the slices the cache lacks
+    /// Pack the cached slices only: render no slice (the fog falloff's few reference renders excepted), and fail naming the slices the cache lacks
     #[arg(long, conflicts_with = "slice")]
     pack_only: bool,
     /// Write a job for a farm manager instead of baking: `openjd` writes OUT/bake.openjd.yaml (Open Job Description), a task per slice and a pack step
@@ -355,8 +355,8 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
     if let Err(e) = sky::lut::atomic::write_atomically(&params_path, format!("{params:#}\n").as_bytes()) {
         return fail(format!("cannot write {}: {e}", params_path.display()));
     }
-    let tasks: usize = bake.skies.iter().map(|s| s.slices).sum();
-    eprintln!("sky bake-luts: {} (Open Job Description): {tasks} render tasks, one per slice, then a pack step", path.display());
+    let tasks = bake::openjd::render_tasks(bake).len();
+    eprintln!("sky bake-luts: {} (Open Job Description): {tasks} render tasks, one per sky slice and one per fog slice, then a pack step", path.display());
     eprintln!("sky bake-luts: check it with `openjd check {}`; run it here with `openjd run {} -p file://{} --step Pack --run-dependencies`", path.display(), path.display(), params_path.display());
     if a.json {
         outln!("{}", serde_json::json!({ "plan": "openjd", "template": path, "parameters": params_path, "render_tasks": tasks, "quality": quality.name(), "cache": cache }));

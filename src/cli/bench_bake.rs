@@ -42,6 +42,9 @@ pub struct BenchBakeArgs {
     /// Threads (core-seconds are wall seconds times this; default: all cores)
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Measure the bake's fog slices (its `[fog]` size; their render is the Shadowed Fog, the Fog's quadrature is priced per texel) instead of its sky slices
+    #[arg(long)]
+    pub fog: bool,
     /// Machine-readable output
     #[arg(long)]
     pub json: bool,
@@ -78,11 +81,18 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         stride: a.stride,
         spp: a.spp,
         reference_spp: a.reference_spp,
-        methods: a.methods.iter().map(|m| if *m == MethodArg::Quadrature { SingleScatter::Quadrature } else { SingleScatter::MonteCarlo }).collect(),
+        // The fog's render has no single scattering of sunlight to estimate either way.
+        methods: if a.fog {
+            vec![SingleScatter::Quadrature]
+        } else {
+            a.methods.iter().map(|m| if *m == MethodArg::Quadrature { SingleScatter::Quadrature } else { SingleScatter::MonteCarlo }).collect()
+        },
         threads,
+        fog: a.fog,
     };
     if !a.json {
-        outln!("final-bake cost from every {}th texel, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride, a.spp, a.reference_spp);
+        let what = if a.fog { "fog slices (the Shadowed Fog's render, the Fog's quadrature)" } else { "sky slices" };
+        outln!("final-bake cost of the {what} from every {}th texel, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride, a.spp, a.reference_spp);
     }
     let json = a.json;
     let on_slice = |c: &SliceCost| {
