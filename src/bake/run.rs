@@ -665,12 +665,12 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             };
             if opts.only.is_some() {
                 let threads = rayon::current_num_threads() as f64;
-                for f in &fog_plan[k] {
+                for (j, f) in fog_plan[k].iter().enumerate() {
                     let start = Instant::now();
                     let image = render(&f.view, f.index)?;
                     let slice = slice_of_image(&image, &f.view, &format!("{name} (shadowed fog)"), f.index, start.elapsed().as_secs_f64() * threads)?;
                     opts.cache.put(&f.key, &slice)?;
-                    on_slice(f.index, out.sky.slices);
+                    on_slice(j + 1, fog_plan[k].len());
                 }
             } else {
                 let fog = super::fog::bake_fog(&job, &opts.cache, &cancel, &render, &on_slice)?;
@@ -787,6 +787,20 @@ mod tests {
         let scene = Scene::new(&atm, &spectral_settings(sampling), &MieCache::new(None), &|| {});
         let sky = BasisSky { name: "t".into(), atmosphere: path, width, height, slices: 64, altitude_m: 0.0, threshold_deg: 87.5, line: 1, draft: sampling.clone(), final_: sampling.clone() };
         (atm, scene, sky)
+    }
+
+    /// `--slice` names a sky slice as NAME:INDEX and a fog slice as
+    /// NAME:fog:INDEX, and writes them back the same way.
+    #[test]
+    fn slice_ids_name_sky_and_fog_slices() {
+        let fog: SliceId = "clear:fog:12".parse().unwrap();
+        assert_eq!(fog, SliceId { sky: "clear".into(), index: 12, fog: true });
+        assert_eq!(fog.to_string(), "clear:fog:12");
+        let sky: SliceId = "clear:12".parse().unwrap();
+        assert_eq!((sky.fog, sky.to_string().as_str()), (false, "clear:12"));
+        for bad in ["clear:fog:64", ":fog:3", "clear:fog", "clear"] {
+            assert!(bad.parse::<SliceId>().is_err(), "{bad}");
+        }
     }
 
     /// The forecast's core: a slice's pilot, rendered on its own, plans
