@@ -201,6 +201,33 @@ fn a_draft_forecasts_its_cost_from_probes() {
     assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
 }
 
+/// With adaptive sampling the forecast comes from pilots, the fog slices'
+/// too (their Shadowed Fog's pilot, the Fog's quadrature timed): the plan
+/// counts the fog slices, every progress event after the forecast has an
+/// ETA, and the last has every texel, sky and fog, done.
+#[test]
+fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("luts");
+    let bake = tmp.path().join("adaptive.toml");
+    let atmosphere = root().join("tests/atmospheres/disort_rayleigh.toml");
+    let text = format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
+    std::fs::write(&bake, text).unwrap();
+    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"], tmp.path());
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    let planned = events.iter().find(|e| e["event"] == "planned").unwrap();
+    // 64 sky slices and 64 fog slices, of which 63 distinct fog views.
+    assert_eq!((planned["slices_total"].as_u64(), planned["fog_slices"].as_u64()), (Some(128), Some(63)), "{planned}");
+    let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
+    assert_eq!(forecast["from"], "pilots");
+    let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
+    assert!(at("forecast") < at("slice"));
+    assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
+    let last = events.iter().rev().find(|e| e["event"] == "progress").unwrap();
+    assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(64 * 64 + 63 * 64), Some(64 * 64 + 63 * 64)), "{last}");
+}
+
 /// A texel that is not finite is a bake error naming the basis sky, the
 /// slice and the texel (here planted in a cached slice), reported in the
 /// `--json` summary too, and nothing is written.
