@@ -211,7 +211,8 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
     let out = tmp.path().join("luts");
     let bake = tmp.path().join("adaptive.toml");
     let atmosphere = root().join("tests/atmospheres/disort_rayleigh.toml");
-    let text = format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
+    let text =
+        format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
     std::fs::write(&bake, text).unwrap();
     let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
