@@ -10,12 +10,14 @@ space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
+.PHONY: all build test ktx-parse openjd lavapipe demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
 
 all: build
 
+# The user's build: with the GPU preview (`sky preview`, wgpu). A build
+# for `sky worker` PCs can leave it out: `cargo build --release`.
 build:
-	$(CARGO) build --release --locked
+	$(CARGO) build --release --locked --features preview
 
 # The whole test suite, in the release profile so dependencies build once.
 # tests/openjd.rs runs Open Job Description's CLI from .venv-openjd (`make
@@ -27,9 +29,18 @@ build:
 # test` runs without it and reports those tests ignored). Only the sky
 # crate is rebuilt with it, and rebuilt without it afterwards, so that
 # target/release/sky is a user's build again.
-test: build ktx-parse openjd
-	$(CARGO) test --release --locked --features fault-injection
-	$(CARGO) build --release --locked
+# tests/preview.rs runs the GPU preview on Mesa's lavapipe (a Vulkan driver
+# on the CPU; `make lavapipe`) through Vulkan only: on wgpu's GL fallback
+# formats go missing and arrays read back as zeros, so a missing driver
+# must fail, not fall back.
+test: build ktx-parse openjd lavapipe
+	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(CARGO) test --release --locked --features fault-injection,preview
+	$(CARGO) build --release --locked --features preview
+
+# Mesa's lavapipe from Debian when the machine has no Vulkan driver for it
+# (CI runs as root on a fresh machine); otherwise say what is missing.
+lavapipe:
+	@ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then apt-get update -qq && apt-get install -y -qq mesa-vulkan-drivers libvulkan1; else echo "make test needs Mesa's lavapipe (e.g. apt-get install mesa-vulkan-drivers libvulkan1)" >&2; exit 1; fi; }
 
 # Node.js and npm from Debian when the machine lacks them (CI runs as root
 # on a fresh machine); otherwise say what is missing.
@@ -47,7 +58,7 @@ openjd:
 # The main job on the embedded default: optical properties and plots of the
 # basis atmospheres, a look at Mie theory, a rendered sky, and a draft bake of
 # the eight basis-sky LUTs, verified against direct renders and decoded.
-demo: build
+demo: build lavapipe
 	@mkdir -p $(OUT)
 	$(SKY) atmosphere check atmospheres/*.toml
 	$(SKY) atmosphere inspect atmospheres/clear.toml --plot $(OUT)/clear
@@ -61,8 +72,9 @@ demo: build
 	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 88,90 --depth-m 20000
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --sun-azimuth-deg 60 --haziness 0.5 --camera pinhole --look-elevation-deg 3 --fov-deg 40 --size 480x160 --landscape --out $(OUT)/landscape.exr --png $(OUT)/landscape.png
 	$(SKY) lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot $(OUT)/fog
+	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(SKY) preview $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --camera fisheye --size 512x512 --out $(OUT)/preview
 	@echo "plots in $(OUT)/clear and $(OUT)/hazed; a rendered sky in $(OUT)/clear_fisheye.exr and .png;"
-	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png; a landscape seen through the decoded fog in $(OUT)/landscape.png, the fitted fog falloff in $(OUT)/fog/falloff.png"
+	@echo "a draft LUT bake in $(OUT)/luts (manifest.json, 8 KTX2 sky arrays, transmittance.ktx2), its verification plots in $(OUT)/luts/verify, a sky decoded from it in $(OUT)/decoded.exr and .png; a landscape seen through the decoded fog in $(OUT)/landscape.png, the fitted fog falloff in $(OUT)/fog/falloff.png, the same sky decoded on the GPU in $(OUT)/preview/sky.png"
 
 # Benchmarks reported in the README.
 bench: build

@@ -22,6 +22,8 @@ pub mod lru;
 pub mod lut;
 pub mod mie;
 pub mod plot;
+#[cfg(feature = "preview")]
+pub mod preview;
 pub mod render;
 pub mod session;
 pub mod spectrum;

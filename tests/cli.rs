@@ -27,14 +27,22 @@ fn help_lists_every_command() {
     }
 }
 
+/// `sky preview` of a file that is not a bake's manifest is an error naming
+/// it (exit 1); a build without the `preview` feature says so instead (exit
+/// 2); either way nothing is written.
 #[test]
-fn unbuilt_commands_say_so_and_exit_2() {
+fn preview_refuses_what_is_not_a_bake() {
     let c = tempfile::tempdir().unwrap();
-    let out_file = c.path().join("sky.exr");
-    let o = sky(&["preview", "atmospheres/clear.toml", "--out", out_file.to_str().unwrap()], c.path());
-    assert_eq!(o.status.code(), Some(2));
-    assert!(text(&o).1.contains("not implemented yet"), "{}", text(&o).1);
-    assert!(!out_file.exists());
+    let out = c.path().join("preview");
+    let o = sky(&["preview", "atmospheres/clear.toml", "--sun-elevation-deg", "10", "--out", out.to_str().unwrap()], c.path());
+    if cfg!(feature = "preview") {
+        assert_eq!(o.status.code(), Some(1), "{}", text(&o).1);
+        assert!(text(&o).1.contains("clear.toml"), "{}", text(&o).1);
+    } else {
+        assert_eq!(o.status.code(), Some(2));
+        assert!(text(&o).1.contains("built without the GPU preview"), "{}", text(&o).1);
+    }
+    assert!(!out.exists());
 }
 
 #[test]

@@ -67,16 +67,16 @@ pub struct VerifyArgs {
 pub struct Conditions {
     /// Sun elevation above the horizon, degrees (-90 to 90; below -10 the last slice holds)
     #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
-    sun_elevation_deg: f64,
+    pub(super) sun_elevation_deg: f64,
     /// Sun azimuth, degrees
     #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_negative_numbers = true)]
-    sun_azimuth_deg: f64,
+    pub(super) sun_azimuth_deg: f64,
     /// 0 = the clear basis sky, 1 = hazed
     #[arg(long, default_value_t = 0.0)]
-    haziness: f64,
+    pub(super) haziness: f64,
     /// 0 = sunny; 1/6 = cloudy0, ..., 1 = cloudy5 (the manifest's weather rule)
     #[arg(long, default_value_t = 0.0)]
-    cloudiness: f64,
+    pub(super) cloudiness: f64,
 }
 
 #[derive(Args, Debug)]
@@ -100,7 +100,7 @@ pub struct SampleArgs {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
-enum CameraKind {
+pub(super) enum CameraKind {
     Fisheye,
     Equirect,
     Pinhole,
@@ -158,7 +158,7 @@ fn parse_pair(s: &str) -> Result<(f64, f64), String> {
     Ok((a, b))
 }
 
-fn check(c: &Conditions) -> Result<()> {
+pub(super) fn check(c: &Conditions) -> Result<()> {
     if !(-90.0..=90.0).contains(&c.sun_elevation_deg) {
         return usage(format!("--sun-elevation-deg must be from -90 to 90, got {}", c.sun_elevation_deg));
     }
@@ -173,7 +173,7 @@ fn check(c: &Conditions) -> Result<()> {
     Ok(())
 }
 
-fn load(manifest: &std::path::Path) -> Option<Luts> {
+pub(super) fn load(manifest: &std::path::Path) -> Option<Luts> {
     match Luts::load(manifest) {
         Ok(l) => Some(l),
         Err(e) => {

@@ -22,6 +22,7 @@ mod lut;
 mod lut_fog;
 mod lut_interpolation;
 mod mie;
+mod preview;
 mod progress;
 mod render;
 mod worker;
@@ -60,8 +61,8 @@ enum Command {
     /// Read a bake's LUTs as a runtime does: sample a direction, decode a whole sky
     #[command(subcommand)]
     Lut(lut::LutCommand),
-    /// Headless GPU preview of baked LUTs and clouds (not implemented yet)
-    Preview(NotYet),
+    /// Headless GPU preview of a bake: its sky decoded on the GPU (lavapipe without one) to EXR and PNG (fog and clouds: not yet)
+    Preview(preview::PreviewArgs),
     /// Validate and inspect atmosphere files (TOML; a file without a [sun]
     /// table gets the shipped ASTM G173-03 extraterrestrial sun with a 0.533
     /// degree disk)
@@ -85,19 +86,6 @@ pub fn usage<T>(msg: impl Into<String>) -> anyhow::Result<T> {
     Err(UsageError(msg.into()).into())
 }
 
-/// Arguments of a command that is not built yet: accepted and ignored.
-#[derive(clap::Args)]
-struct NotYet {
-    #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
-    args: Vec<String>,
-}
-
-fn not_yet(name: &str, issue: Option<u32>) -> anyhow::Result<ExitCode> {
-    let tracked = issue.map(|i| format!(" (tracked in issue #{i})")).unwrap_or_default();
-    eprintln!("sky {name}: not implemented yet{tracked}; no output was written");
-    Ok(ExitCode::from(EXIT_USAGE))
-}
-
 /// What a failed write to stdout does (see `outln!`).
 pub fn stdout_failed(e: std::io::Error) -> ! {
     if e.kind() == std::io::ErrorKind::BrokenPipe {
@@ -115,7 +103,7 @@ pub fn main() -> ExitCode {
         Command::Worker(a) => worker::run(a),
         Command::BakeLuts(a) => bake::run(a),
         Command::Lut(c) => lut::run(c),
-        Command::Preview(_) => not_yet("preview", None),
+        Command::Preview(a) => preview::run(a),
         Command::Atmosphere(c) => atmosphere::run(c),
         Command::Mie(a) => mie::run(a),
         Command::Bench(b) => bench::run(b),

@@ -215,6 +215,10 @@ async fn serve(shared: Arc<Shared>, addr: SocketAddr, tls: Option<tonic::transpo
     let name = shared.config.name.clone();
     // Owner-first policies.
     if !schedule.is_empty() {
+        // Paused before the first call is served, not at the task's first
+        // tick: under load that came after a coordinator's Hello.
+        let inside = in_windows(&schedule, local_minute_of_day());
+        shared.update_pause(|p| p.schedule = !inside);
         let s = shared.clone();
         tokio::spawn(async move {
             let mut tick = tokio::time::interval(Duration::from_secs(30));

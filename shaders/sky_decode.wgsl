@@ -1,0 +1,185 @@
+// The basis-sky LUTs decoded on the GPU: a transcription of the CPU
+// reference decoder (src/lut/decode.rs `sample_sky`, src/lut/mapping.rs
+// `DirectionMapping::uv_in_region`), tested against it by readback
+// (src/preview/sky_pass.rs). What a frame shares is computed once on the
+// CPU and passed in `params`: each active basis sky's weight (the weather
+// rule, `lut::weather::basis_weights`, renormalised over the bake's skies),
+// its two slices, their scales (2^-scale_log2) and regions, and the
+// fraction between them. The shader does the per-direction work: the
+// direction mapping of the actual sun, bilinear filtering at texel centres
+// with clamp-to-edge (done by hand with textureLoad, in f32, so that it is
+// the CPU's arithmetic and not the sampler's fixed-point weights), the
+// geometric blend between slices and the sum over basis skies.
+//
+// One invocation per direction: `directions[i].xyz` is a unit vector in
+// the world frame (z up), `.w` is 1 where the pixel sees the sky and 0
+// outside the camera's view; `radiance[i].rgb` is linear RGB of the
+// manifest's colour space.
+
+const PI: f32 = 3.14159265358979;
+// The concept code's knots of the upper region's v transform
+// (lut::mapping::{A, B, C, D}).
+const KA: f32 = 0.50;
+const KB: f32 = 0.80;
+const KC: f32 = 0.25;
+const KD: f32 = 0.50;
+
+// header: (sun zenith, radians, clamped to [0, 100 degrees]; cos and sin of
+// the sun's azimuth; number of active skies). Per active sky k, two rows:
+// sky[2k] = (weight, fraction between slices, layer 0, layer 1),
+// sky[2k + 1] = (scale 0, scale 1, slice 0 sun-centred (1) or not (0),
+// slice 1 likewise).
+struct Params {
+    header: vec4<f32>,
+    sky: array<vec4<f32>, 6>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read_write> radiance: array<vec4<f32>>;
+@group(0) @binding(3) var sky0: texture_2d_array<f32>;
+@group(0) @binding(4) var sky1: texture_2d_array<f32>;
+@group(0) @binding(5) var sky2: texture_2d_array<f32>;
+
+fn texel(k: u32, xy: vec2<i32>, layer: i32) -> vec3<f32> {
+    if k == 0u {
+        return textureLoad(sky0, xy, layer, 0).rgb;
+    } else if k == 1u {
+        return textureLoad(sky1, xy, layer, 0).rgb;
+    }
+    return textureLoad(sky2, xy, layer, 0).rgb;
+}
+
+fn size_of(k: u32) -> vec2<i32> {
+    if k == 0u {
+        return vec2<i32>(textureDimensions(sky0));
+    } else if k == 1u {
+        return vec2<i32>(textureDimensions(sky1));
+    }
+    return vec2<i32>(textureDimensions(sky2));
+}
+
+// Texture::bilinear: texel centres at ((x + 0.5) / w, (y + 0.5) / h),
+// clamped to the edge.
+fn bilinear(k: u32, layer: i32, uv: vec2<f32>) -> vec3<f32> {
+    let n = size_of(k);
+    let p = uv * vec2<f32>(n) - 0.5;
+    let p0 = floor(p);
+    let f = p - p0;
+    let a = clamp(vec2<i32>(p0), vec2<i32>(0), n - 1);
+    let b = clamp(vec2<i32>(p0) + 1, vec2<i32>(0), n - 1);
+    let top = texel(k, vec2<i32>(a.x, a.y), layer) * (1.0 - f.x) + texel(k, vec2<i32>(b.x, a.y), layer) * f.x;
+    let bottom = texel(k, vec2<i32>(a.x, b.y), layer) * (1.0 - f.x) + texel(k, vec2<i32>(b.x, b.y), layer) * f.x;
+    return top * (1.0 - f.y) + bottom * f.y;
+}
+
+// mapping::upper_v_inverse.
+fn upper_v_inverse(vp: f32) -> f32 {
+    if vp <= KC {
+        return KA * sqrt(max(vp / KC, 0.0));
+    } else if vp <= KD {
+        let k2 = max(1.0 - (vp - KC) / (KD - KC), 0.0);
+        return KB - sqrt(k2) * (KB - KA);
+    }
+    let s = (1.0 - vp) / (1.0 - KD);
+    return KB + sqrt(max(1.0 - s * s, 0.0)) * (1.0 - KB);
+}
+
+// mapping::lower_v_inverse.
+fn lower_v_inverse(vp: f32, theta_sun: f32) -> f32 {
+    let k = min(theta_sun / PI, 0.5);
+    if vp <= k {
+        return k - sqrt(max(k * k - vp * vp, 0.0));
+    }
+    return k + sqrt(max((1.0 - k) * (1.0 - k) - (1.0 - vp) * (1.0 - vp), 0.0));
+}
+
+// atan2(y, x) for y >= 0, in [0, pi]: on the negative x axis (y = 0) it is
+// pi, as in f64 on the CPU; a GPU's atan2 may not give pi there (lavapipe's
+// gives 0 or -pi: WGSL leaves atan2 at a zero y loosely specified), which
+// would read the opposite edge of the texture.
+fn heading(y: f32, x: f32) -> f32 {
+    if y == 0.0 {
+        return select(0.0, PI, x < 0.0);
+    }
+    let phi = atan2(y, x);
+    if phi < 0.0 {
+        return PI;
+    }
+    return min(phi, PI);
+}
+
+// DirectionMapping::uv_in_region, `d` in the frame with the sun at azimuth
+// 0. Angles from the sun and the zenith are taken with atan2 (the CPU's
+// acos of a dot product, in f32, would lose half its digits near the sun).
+fn uv_in_region(d_in: vec3<f32>, theta_sun: f32, sun_centred: bool) -> vec2<f32> {
+    let d = normalize(vec3<f32>(d_in.x, abs(d_in.y), d_in.z));
+    if sun_centred {
+        let s = vec3<f32>(sin(theta_sun), 0.0, cos(theta_sun));
+        let t = vec3<f32>(cos(theta_sun), 0.0, -sin(theta_sun));
+        let theta = atan2(length(cross(d, s)), dot(d, s));
+        let x = dot(d, t);
+        let y = d.y;
+        var phi = 0.0;
+        if x != 0.0 || y != 0.0 {
+            phi = heading(y, x);
+        }
+        let edge = PI / 2.0 - atan(sin(PI / 2.0 - phi) * tan(theta_sun));
+        var vp = 0.5 + 0.5 * (theta - edge) / (PI - edge);
+        if theta <= edge {
+            vp = 0.5 * theta / edge;
+        }
+        return vec2<f32>(phi / PI, upper_v_inverse(clamp(vp, 0.0, 1.0)));
+    }
+    let theta = atan2(length(d.xy), d.z);
+    let phi = heading(d.y, d.x);
+    return vec2<f32>(phi / PI, lower_v_inverse(theta / PI, theta_sun));
+}
+
+// decode::between_slices: geometric where both are positive.
+fn between(a: f32, b: f32, f: f32) -> f32 {
+    if a > 0.0 && b > 0.0 {
+        return exp((1.0 - f) * log(a) + f * log(b));
+    }
+    return (1.0 - f) * a + f * b;
+}
+
+// decode::sample_sky for active sky k.
+fn sample_sky(k: u32, d: vec3<f32>) -> vec3<f32> {
+    let theta_sun = params.header.x;
+    let r0 = params.sky[2u * k];
+    let r1 = params.sky[2u * k + 1u];
+    let f = r0.y;
+    let a = bilinear(k, i32(r0.z), uv_in_region(d, theta_sun, r1.z > 0.5)) * r1.x;
+    if f == 0.0 {
+        return a;
+    }
+    let b = bilinear(k, i32(r0.w), uv_in_region(d, theta_sun, r1.w > 0.5)) * r1.y;
+    if f == 1.0 {
+        return b;
+    }
+    return vec3<f32>(between(a.x, b.x, f), between(a.y, b.y, f), between(a.z, b.z, f));
+}
+
+@compute @workgroup_size(64)
+fn decode(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&directions) {
+        return;
+    }
+    let dir = directions[i];
+    if dir.w == 0.0 {
+        radiance[i] = vec4<f32>(0.0, 0.0, 0.0, 0.0);
+        return;
+    }
+    // decode::rotate_to_sun_frame.
+    let c = params.header.y;
+    let s = params.header.z;
+    let d = vec3<f32>(c * dir.x + s * dir.y, -s * dir.x + c * dir.y, dir.z);
+    var rgb = vec3<f32>(0.0);
+    let count = u32(params.header.w);
+    for (var k = 0u; k < count; k++) {
+        rgb += params.sky[2u * k].x * sample_sky(k, d);
+    }
+    radiance[i] = vec4<f32>(rgb, 1.0);
+}

@@ -1,0 +1,112 @@
+//! `sky preview`: a bake's sky decoded on the GPU (wgpu; a real GPU or
+//! Mesa's lavapipe), written as linear XYZ OpenEXR and a tonemapped PNG.
+//! Without the `preview` feature the command says how to get it.
+
+use super::lut::{CameraKind, Conditions};
+use super::EXIT_USAGE;
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Args, Debug)]
+pub struct PreviewArgs {
+    /// The bake's manifest.json
+    manifest: PathBuf,
+    #[command(flatten)]
+    conditions: Conditions,
+    #[arg(long, value_enum, default_value = "fisheye")]
+    camera: CameraKind,
+    /// Image size WIDTHxHEIGHT
+    #[arg(long, value_parser = super::render::parse_size, default_value = "512x512")]
+    size: (usize, usize),
+    /// Pinhole: view azimuth, degrees
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    look_azimuth_deg: f64,
+    /// Pinhole: view elevation, degrees
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    look_elevation_deg: f64,
+    /// Pinhole: horizontal field of view, degrees
+    #[arg(long, default_value_t = 90.0)]
+    fov_deg: f64,
+    /// Output folder: sky.exr (CIE XYZ, Y in cd/m^2) and sky.png (tonemapped)
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// PNG exposure, stops (0: the median luminance maps to a quarter of white, then Reinhard)
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure_ev: f64,
+    /// Machine-readable summary on stdout (adapter, files, GPU time)
+    #[arg(long)]
+    json: bool,
+}
+
+#[cfg(not(feature = "preview"))]
+pub fn run(_a: PreviewArgs) -> Result<ExitCode> {
+    eprintln!("sky preview: this sky was built without the GPU preview (the `preview` feature, wgpu); build it with `make build` or `cargo build --release --features preview`; no output was written");
+    Ok(ExitCode::from(EXIT_USAGE))
+}
+
+#[cfg(feature = "preview")]
+pub fn run(a: PreviewArgs) -> Result<ExitCode> {
+    use super::EXIT_INVALID;
+    use anyhow::Context;
+    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::preview::gpu::Gpu;
+    use sky::preview::sky_pass::{SkyPass, Weather};
+    use sky::render::camera::Camera;
+    use sky::render::{output, Image, PixelResult};
+
+    let _ = EXIT_USAGE;
+    super::lut::check(&a.conditions)?;
+    let (w, h) = a.size;
+    if w == 0 || h == 0 {
+        return super::usage("--size must be at least 1x1");
+    }
+    let Some(luts) = super::lut::load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    let gpu = match Gpu::new() {
+        Ok(g) => g,
+        Err(e) => {
+            eprintln!("sky preview: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let pass = SkyPass::new(&gpu, &luts).context("preparing the sky pass")?;
+    let c = &a.conditions;
+    let camera = match a.camera {
+        CameraKind::Fisheye => Camera::Fisheye,
+        CameraKind::Equirect => Camera::Equirect,
+        CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
+    };
+    let dirs = pixel_directions(&camera, w, h);
+    let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness };
+    let decoded = pass.decode(&gpu, &luts, &weather, &dirs).context("decoding the sky on the GPU")?;
+    let m = luts.manifest.colour.xyz_from_rgb;
+    let pixels = decoded.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
+    let image = Image { width: w, height: h, pixels };
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let (exr, png) = (a.out.join("sky.exr"), a.out.join("sky.png"));
+    let metadata = vec![
+        ("generator".to_string(), format!("sky {} preview ({})", sky::VERSION, gpu.describe())),
+        ("manifest".to_string(), a.manifest.display().to_string()),
+        ("sun_elevation_deg".to_string(), c.sun_elevation_deg.to_string()),
+        ("sun_azimuth_deg".to_string(), c.sun_azimuth_deg.to_string()),
+        ("haziness".to_string(), c.haziness.to_string()),
+        ("cloudiness".to_string(), c.cloudiness.to_string()),
+        ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2)".to_string()),
+    ];
+    output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
+    output::write_png(&png, &image, a.exposure_ev, None).with_context(|| format!("writing {}", png.display()))?;
+    if a.json {
+        let summary = serde_json::json!({
+            "adapter": gpu.describe(),
+            "files": [exr, png],
+            "width": w,
+            "height": h,
+            "sky_pass_seconds": decoded.seconds,
+        });
+        outln!("{summary}");
+    } else {
+        eprintln!("sky preview: {w}x{h} decoded on {} in {:.1} ms, written to {} and {}", gpu.describe(), 1e3 * decoded.seconds, exr.display(), png.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}

@@ -1,0 +1,53 @@
+//! `sky preview` (issue 14): the baked LUTs decoded on a GPU through wgpu,
+//! headless, on a real GPU or on Mesa's lavapipe (a Vulkan driver on the
+//! CPU), with the WGSL in `shaders/`. Behind the `preview` feature, so the
+//! library and `sky worker` do not pull wgpu.
+//!
+//! Built so far: the device ([`gpu`]) and the sky pass ([`sky_pass`]),
+//! which decodes the basis-sky arrays exactly as the CPU reference decoder
+//! (`lut::decode`) does and is tested against it by readback. Not yet: the
+//! global fog over a terrain, the clouds and their G-buffer, timelines.
+
+pub mod gpu;
+pub mod sky_pass;
+
+/// What stops a preview.
+#[derive(Debug, thiserror::Error)]
+pub enum PreviewError {
+    /// No adapter: no GPU and no Vulkan driver such as lavapipe.
+    #[error("no GPU adapter ({0}); on a machine without a GPU install Mesa's lavapipe (apt-get install mesa-vulkan-drivers libvulkan1) and set WGPU_BACKEND=vulkan")]
+    NoAdapter(String),
+    #[error("the GPU device could not be opened: {0}")]
+    Device(String),
+    /// A shader, pipeline or command the device refused (a validation
+    /// error), with wgpu's message.
+    #[error("the GPU refused the {what}: {message}")]
+    Validation { what: &'static str, message: String },
+    #[error("reading back from the GPU failed: {0}")]
+    Readback(String),
+    /// The bake cannot be previewed.
+    #[error("{0}")]
+    Bake(String),
+}
+
+/// The WGSL sources, compiled into the binary (and validated by naga in
+/// the tests).
+pub mod shaders {
+    /// The basis-sky decode (see `sky_pass`).
+    pub const SKY_DECODE: &str = include_str!("../../shaders/sky_decode.wgsl");
+    /// Every shader, by file name.
+    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE)];
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every shader parses and validates with naga, the compiler wgpu uses,
+    /// without a device.
+    #[test]
+    fn every_shader_validates() {
+        for &(name, source) in super::shaders::ALL {
+            let module = wgpu::naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+            wgpu::naga::valid::Validator::new(wgpu::naga::valid::ValidationFlags::all(), wgpu::naga::valid::Capabilities::default()).validate(&module).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+        }
+    }
+}

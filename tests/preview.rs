@@ -1,0 +1,115 @@
+//! The GPU preview's sky pass against the CPU reference decoder (issue
+//! 14), by readback, on whatever adapter the environment gives (`make
+//! test`: Mesa's lavapipe through Vulkan, `WGPU_BACKEND=vulkan`, so a
+//! missing driver fails here instead of falling back to GL).
+#![cfg(feature = "preview")]
+
+use sky::lut::decode::Luts;
+use sky::preview::gpu::Gpu;
+use sky::preview::sky_pass::{SkyPass, Weather};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A draft bake of `tests/bakes/preview.toml` (clear, hazed, cloudy0 and
+/// cloudy1), into `dir`.
+fn bake(dir: &Path) -> Luts {
+    let out = dir.join("luts");
+    let o = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["bake-luts", root().join("tests/bakes/preview.toml").to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .env("SKY_CACHE_DIR", "off")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    Luts::load(&out.join("manifest.json")).unwrap()
+}
+
+/// The GPU's decode equals the CPU decoder's on a grid of directions (every
+/// 7.5 degrees of zenith angle, ground included, and 15 of azimuth) for
+/// suns between slices and at slice centres, through twilight and across
+/// the switch between the two direction mappings (sun zenith 87.5 degrees
+/// here), and for haziness and cloudiness that blend one to three basis
+/// skies, sunny and cloudy.
+///
+/// Tolerance: 1e-3 of the value plus 1e-6 of the frame's brightest, plus
+/// how much the CPU decoder's own value changes when the direction moves by
+/// 2e-6 rad (about ten f32 roundings of an angle near π/2). That last
+/// term matters only at the horizon: there the talk's v transform has an
+/// unbounded slope (v − 0.8 ∝ √(0.5 − v') at the knot where the horizon
+/// sits), so the f32 rounding of the angle from the sun moves the sample by
+/// up to 1e-3 of a texel step, between ground and sky texels; at the poles
+/// of the latitude-longitude mapping (the zenith and the nadir, where every
+/// u is the same direction and which column is read depends on the signs of
+/// zeros); and with the sun a few degrees up in the sun-centred mapping,
+/// where tan(θ_sun) amplifies rounding near the horizon (the squeeze that
+/// the switch to latitude-longitude exists for). Elsewhere the term is far
+/// below the first, and fewer than 2 % of the values may need it. The
+/// textures are the same R11G11B10F words on both sides and the GPU filters
+/// by hand (textureLoad, not the sampler, whose weights Vulkan only needs
+/// to carry to 4 fractional bits, up to 3 % of a texel step), so what
+/// differs is f32 against f64 arithmetic: the direction mapping's
+/// trigonometry (about 1e-6 of a texel), the geometric blend's exp and log
+/// of values spanning 10 decades (a few 1e-6 relative). 1e-3 leaves room
+/// for a GPU's less accurate transcendentals (WGSL allows exp and log
+/// errors of a few ulp times the argument) and fails at any difference of
+/// method: a slice, a mirror or a texel off by one misses by percents.
+#[test]
+fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
+    let tmp = tempfile::tempdir().unwrap();
+    let luts = bake(tmp.path());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    eprintln!("adapter: {}", gpu.describe());
+    let pass = SkyPass::new(&gpu, &luts).unwrap();
+    let dirs: Vec<Option<glam::DVec3>> = (0..=24).flat_map(|i| (0..24).map(move |j| Some(sky::render::camera::direction_deg(7.5 * i as f64, 15.0 * j as f64)))).chain([None]).collect();
+    let elevations = [63.1, 41.7, 23.3, 8.2, 3.1, 2.6, 2.4, 0.4, -0.9, -2.7, -7.5, -9.95];
+    let weathers = [(0.0, 0.0), (1.0, 0.0), (0.3, 0.1), (0.6, 0.25), (0.0, 0.3)];
+    let (mut worst, mut compared, mut steep) = (0.0f64, 0, 0);
+    for &e in &elevations {
+        for &(haziness, cloudiness) in &weathers {
+            let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: 7.0, haziness, cloudiness };
+            let gpu_rgb = pass.decode(&gpu, &luts, &weather, &dirs).unwrap().rgb;
+            let cpu: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| luts.sample(e, 7.0, haziness, cloudiness, d))).collect();
+            // The CPU decoder's change over directions within 2e-6 rad.
+            let step_deg = 2e-6f64.to_degrees();
+            let spread: Vec<[f64; 3]> = dirs
+                .iter()
+                .zip(&cpu)
+                .map(|(d, c)| {
+                    let Some(d) = d else { return [0.0; 3] };
+                    let (zenith, azimuth) = (d.z.clamp(-1.0, 1.0).acos().to_degrees(), d.y.atan2(d.x).to_degrees());
+                    let mut m = [0.0f64; 3];
+                    for (dz, da) in [(step_deg, 0.0), (-step_deg, 0.0), (0.0, step_deg), (0.0, -step_deg)] {
+                        let p = luts.sample(e, 7.0, haziness, cloudiness, sky::render::camera::direction_deg(zenith + dz, azimuth + da));
+                        for k in 0..3 {
+                            m[k] = m[k].max((p[k] - c[k]).abs());
+                        }
+                    }
+                    m
+                })
+                .collect();
+            let brightest = cpu.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
+            assert!(brightest > 0.0, "sun {e}, h {haziness}, c {cloudiness}: a black sky");
+            for (i, (g, c)) in gpu_rgb.iter().zip(&cpu).enumerate() {
+                for k in 0..3 {
+                    let diff = (g[k] as f64 - c[k]).abs();
+                    let allowed = 1e-3 * c[k].abs() + 1e-6 * brightest + spread[i][k];
+                    assert!(diff <= allowed, "sun {e}, h {haziness}, c {cloudiness}, direction {i} ({:?}), channel {k}: GPU {} against CPU {}", dirs[i], g[k], c[k]);
+                    if diff > 1e-3 * c[k].abs() + 1e-6 * brightest {
+                        steep += 1;
+                    } else {
+                        worst = worst.max(diff / (c[k].abs() + 1e-3 * brightest));
+                    }
+                    compared += 1;
+                }
+            }
+        }
+    }
+    eprintln!("{compared} values compared; largest difference {worst:.2e} of the value where the mapping is not steep; {steep} where it is, within its own change over 2e-6 rad");
+    // Where the mapping is that steep is a thin set of directions: a
+    // difference of method (a texel, a slice, a mirror off) would be
+    // everywhere.
+    assert!(steep * 50 < compared, "{steep} of {compared} values needed the mapping's own change");
+}
