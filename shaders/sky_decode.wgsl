@@ -28,10 +28,14 @@ const KD: f32 = 0.50;
 // the sun's azimuth; number of active skies). Per active sky k, two rows:
 // sky[2k] = (weight, fraction between slices, layer 0, layer 1),
 // sky[2k + 1] = (scale 0, scale 1, slice 0 sun-centred (1) or not (0),
-// slice 1 likewise).
+// slice 1 likewise). The sun's disk (decode::Luts::decode_image's, from the
+// bake's sunlight): sun = (unit vector toward it, world frame; sine of its
+// angular radius), disk = (its radiance, linear RGB; 1 to draw it, 0 not).
 struct Params {
     header: vec4<f32>,
     sky: array<vec4<f32>, 6>,
+    sun: vec4<f32>,
+    disk: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -180,6 +184,12 @@ fn decode(@builtin(global_invocation_id) id: vec3<u32>) {
     let count = u32(params.header.w);
     for (var k = 0u; k < count; k++) {
         rgb += params.sky[2u * k].x * sample_sky(k, d);
+    }
+    // Inside the disk: within its angular radius of the sun, tested by the
+    // sine (a cosine this close to 1 has too few digits in f32).
+    let toward = params.sun.xyz;
+    if params.disk.w > 0.5 && dot(dir.xyz, toward) > 0.0 && length(cross(dir.xyz, toward)) <= params.sun.w {
+        rgb += params.disk.rgb;
     }
     radiance[i] = vec4<f32>(rgb, 1.0);
 }

@@ -4,20 +4,36 @@
 //! missing driver fails here instead of falling back to GL).
 #![cfg(feature = "preview")]
 
+use glam::DVec3;
 use sky::lut::decode::Luts;
 use sky::preview::gpu::Gpu;
 use sky::preview::sky_pass::{SkyPass, Weather};
-use std::path::{Path, PathBuf};
+use sky::render::camera::direction_deg;
+use std::path::PathBuf;
 use std::process::Command;
+use std::sync::{Mutex, OnceLock};
+
+/// The tests take the device one at a time.
+static GPU: Mutex<()> = Mutex::new(());
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
 /// A draft bake of `tests/bakes/preview.toml` (clear, hazed, cloudy0 and
-/// cloudy1), into `dir`.
-fn bake(dir: &Path) -> Luts {
-    let out = dir.join("luts");
+/// cloudy1), made once for the tests of this file.
+fn bake() -> &'static Luts {
+    static BAKE: OnceLock<(tempfile::TempDir, Luts)> = OnceLock::new();
+    &BAKE
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let luts = bake_into(&dir.path().join("luts"));
+            (dir, luts)
+        })
+        .1
+}
+
+fn bake_into(out: &std::path::Path) -> Luts {
     let o = Command::new(env!("CARGO_BIN_EXE_sky"))
         .args(["bake-luts", root().join("tests/bakes/preview.toml").to_str().unwrap(), "--out", out.to_str().unwrap()])
         .env("SKY_CACHE_DIR", "off")
@@ -25,6 +41,22 @@ fn bake(dir: &Path) -> Luts {
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     Luts::load(&out.join("manifest.json")).unwrap()
+}
+
+/// How much the CPU decoder's RGB toward `d` changes when the direction
+/// moves by 2e-6 rad (see the first test's tolerance).
+fn cpu_spread(luts: &Luts, w: &Weather, d: DVec3) -> [f64; 3] {
+    let c = luts.sample(w.sun_elevation_deg, w.sun_azimuth_deg, w.haziness, w.cloudiness, d);
+    let step_deg = 2e-6f64.to_degrees();
+    let (zenith, azimuth) = (d.z.clamp(-1.0, 1.0).acos().to_degrees(), d.y.atan2(d.x).to_degrees());
+    let mut m = [0.0f64; 3];
+    for (dz, da) in [(step_deg, 0.0), (-step_deg, 0.0), (0.0, step_deg), (0.0, -step_deg)] {
+        let p = luts.sample(w.sun_elevation_deg, w.sun_azimuth_deg, w.haziness, w.cloudiness, direction_deg(zenith + dz, azimuth + da));
+        for k in 0..3 {
+            m[k] = m[k].max((p[k] - c[k]).abs());
+        }
+    }
+    m
 }
 
 /// The GPU's decode equals the CPU decoder's on a grid of directions (every
@@ -58,38 +90,21 @@ fn bake(dir: &Path) -> Luts {
 /// method: a slice, a mirror or a texel off by one misses by percents.
 #[test]
 fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
-    let tmp = tempfile::tempdir().unwrap();
-    let luts = bake(tmp.path());
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     eprintln!("adapter: {}", gpu.describe());
-    let pass = SkyPass::new(&gpu, &luts).unwrap();
-    let dirs: Vec<Option<glam::DVec3>> = (0..=24).flat_map(|i| (0..24).map(move |j| Some(sky::render::camera::direction_deg(7.5 * i as f64, 15.0 * j as f64)))).chain([None]).collect();
+    let pass = SkyPass::new(&gpu, luts).unwrap();
+    let dirs: Vec<Option<glam::DVec3>> = (0..=24).flat_map(|i| (0..24).map(move |j| Some(direction_deg(7.5 * i as f64, 15.0 * j as f64)))).chain([None]).collect();
     let elevations = [63.1, 41.7, 23.3, 8.2, 3.1, 2.6, 2.4, 0.4, -0.9, -2.7, -7.5, -9.95];
     let weathers = [(0.0, 0.0), (1.0, 0.0), (0.3, 0.1), (0.6, 0.25), (0.0, 0.3)];
     let (mut worst, mut compared, mut steep) = (0.0f64, 0, 0);
     for &e in &elevations {
         for &(haziness, cloudiness) in &weathers {
-            let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: 7.0, haziness, cloudiness };
-            let gpu_rgb = pass.decode(&gpu, &luts, &weather, &dirs).unwrap().rgb;
+            let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: 7.0, haziness, cloudiness, sun_disk: false };
+            let gpu_rgb = pass.decode(&gpu, luts, &weather, &dirs).unwrap().rgb;
             let cpu: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| luts.sample(e, 7.0, haziness, cloudiness, d))).collect();
-            // The CPU decoder's change over directions within 2e-6 rad.
-            let step_deg = 2e-6f64.to_degrees();
-            let spread: Vec<[f64; 3]> = dirs
-                .iter()
-                .zip(&cpu)
-                .map(|(d, c)| {
-                    let Some(d) = d else { return [0.0; 3] };
-                    let (zenith, azimuth) = (d.z.clamp(-1.0, 1.0).acos().to_degrees(), d.y.atan2(d.x).to_degrees());
-                    let mut m = [0.0f64; 3];
-                    for (dz, da) in [(step_deg, 0.0), (-step_deg, 0.0), (0.0, step_deg), (0.0, -step_deg)] {
-                        let p = luts.sample(e, 7.0, haziness, cloudiness, sky::render::camera::direction_deg(zenith + dz, azimuth + da));
-                        for k in 0..3 {
-                            m[k] = m[k].max((p[k] - c[k]).abs());
-                        }
-                    }
-                    m
-                })
-                .collect();
+            let spread: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| cpu_spread(luts, &weather, d))).collect();
             let brightest = cpu.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
             assert!(brightest > 0.0, "sun {e}, h {haziness}, c {cloudiness}: a black sky");
             for (i, (g, c)) in gpu_rgb.iter().zip(&cpu).enumerate() {
@@ -112,4 +127,48 @@ fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
     // difference of method (a texel, a slice, a mirror off) would be
     // everywhere.
     assert!(steep * 50 < compared, "{steep} of {compared} values needed the mapping's own change");
+}
+
+/// The sun's disk: through a pinhole 2 degrees wide centred on the sun
+/// (48 x 48 pixels, the disk about 13 across), high and low, the GPU's
+/// image is the CPU decoder's `decode_image` with its disk (CIE XYZ), to
+/// the first test's tolerance, except on the disk's rim, where a pixel
+/// centre within 1e-5 rad of it may fall on either side in f32.
+#[test]
+fn the_gpu_draws_the_sun_disk_the_cpu_decoder_draws() {
+    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::render::camera::Camera;
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let pass = SkyPass::new(&gpu, luts).unwrap();
+    let m = luts.manifest.colour.xyz_from_rgb;
+    for (e, az) in [(20.0, 30.0), (3.0, 200.0)] {
+        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.3, cloudiness: 0.0, sun_disk: true };
+        let camera = Camera::Pinhole { azimuth_deg: az, elevation_deg: e, fov_deg: 2.0 };
+        let (w, h) = (48, 48);
+        let dirs = pixel_directions(&camera, w, h);
+        let gpu_rgb = pass.decode(&gpu, luts, &weather, &dirs).unwrap().rgb;
+        let cpu = luts.decode_image(&camera, w, h, e, az, 0.3, 0.0, true).unwrap();
+        let sun = luts.sun(e, 0.3, 0.0).unwrap();
+        let radius = 0.5 * sun.angular_diameter_deg.to_radians();
+        let toward = direction_deg(90.0 - e, az);
+        let brightest = cpu.iter().flatten().fold(0.0f64, |a, &x| a.max(x));
+        let mut inside = 0;
+        for (i, d) in dirs.iter().enumerate() {
+            let d = d.unwrap();
+            let angle = d.angle_between(toward);
+            if (angle - radius).abs() < 1e-5 {
+                continue;
+            }
+            inside += (angle < radius) as usize;
+            let g = mat_mul(&m, gpu_rgb[i].map(f64::from));
+            let spread = cpu_spread(luts, &weather, d);
+            for k in 0..3 {
+                let allowed = 1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
+                assert!((g[k] - cpu[i][k]).abs() <= allowed, "sun {e} up at {az}, pixel {i} ({angle} rad from the sun's centre), channel {k}: GPU {} against CPU {}", g[k], cpu[i][k]);
+            }
+        }
+        assert!(inside > 50, "sun {e}: only {inside} pixels inside the disk");
+    }
 }

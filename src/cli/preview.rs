@@ -35,6 +35,9 @@ pub struct PreviewArgs {
     /// PNG exposure, stops (0: the median luminance maps to a quarter of white, then Reinhard)
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure_ev: f64,
+    /// Leave out the sun's disk (drawn by default from the bake's sunlight where it covers pixel centres)
+    #[arg(long)]
+    no_sun_disk: bool,
     /// Machine-readable summary on stdout (adapter, files, GPU time)
     #[arg(long)]
     json: bool,
@@ -78,7 +81,7 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
         CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
     };
     let dirs = pixel_directions(&camera, w, h);
-    let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness };
+    let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness, sun_disk: !a.no_sun_disk };
     let decoded = pass.decode(&gpu, &luts, &weather, &dirs).context("decoding the sky on the GPU")?;
     let m = luts.manifest.colour.xyz_from_rgb;
     let pixels = decoded.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();

@@ -34,6 +34,9 @@ pub struct Weather {
     pub sun_azimuth_deg: f64,
     pub haziness: f64,
     pub cloudiness: f64,
+    /// Draw the sun's disk (from the bake's sunlight, `Luts::sun`): its
+    /// radiance where it covers a direction, as `Luts::decode_image` does.
+    pub sun_disk: bool,
 }
 
 /// A bake's sky arrays on the GPU and the pipeline that decodes them.
@@ -125,7 +128,7 @@ impl SkyPass {
     /// Linear RGB toward each of `dirs` (world frame, z up; None: no
     /// direction, black) under `weather`, decoded on the GPU.
     pub fn decode(&self, gpu: &Gpu, luts: &Luts, weather: &Weather, dirs: &[Option<DVec3>]) -> Result<Decoded, PreviewError> {
-        let (params, active) = frame_params(luts, weather);
+        let (params, active) = frame_params(luts, weather)?;
         let n = dirs.len().max(1);
         let dir_data: Vec<f32> =
             dirs.iter().flat_map(|d| d.map_or([0.0; 4], |d| [d.x as f32, d.y as f32, d.z as f32, 1.0])).chain(std::iter::repeat_n(0.0, if dirs.is_empty() { 4 } else { 0 })).collect();
@@ -182,8 +185,9 @@ impl SkyPass {
 /// manifest indices of the active skies, in slot order: the weather rule's
 /// weights renormalised over the skies the bake has (as [`Luts::sample`]
 /// does), each active sky's slice pair ([`slice_pair`]), the slices'
-/// scales and regions.
-pub fn frame_params(luts: &Luts, weather: &Weather) -> (Vec<f32>, Vec<usize>) {
+/// scales and regions; the sun's disk. An error if the disk is asked of a
+/// bake without a sun.
+pub fn frame_params(luts: &Luts, weather: &Weather) -> Result<(Vec<f32>, Vec<usize>), PreviewError> {
     let sun_zenith_deg = 90.0 - weather.sun_elevation_deg;
     let w = basis_weights(weather.haziness, weather.cloudiness);
     let present: Vec<(usize, f64)> = BASIS.iter().enumerate().filter_map(|(k, name)| luts.manifest.skies.iter().position(|s| s.name == *name).map(|i| (i, w[k]))).collect();
@@ -205,5 +209,17 @@ pub fn frame_params(luts: &Luts, weather: &Weather) -> (Vec<f32>, Vec<usize>) {
             None => params.extend([0.0; 8]),
         }
     }
-    (params, active.into_iter().map(|p| p.0).collect())
+    let toward = crate::render::camera::direction_deg(sun_zenith_deg, weather.sun_azimuth_deg);
+    match weather.sun_disk {
+        true => {
+            let sun = luts
+                .sun(weather.sun_elevation_deg, weather.haziness, weather.cloudiness)
+                .ok_or_else(|| PreviewError::Bake("the bake has no sun (made before its transmittance file): bake it again, or leave the disk out".into()))?;
+            let sin_radius = libm::sin(0.5 * sun.angular_diameter_deg.to_radians());
+            params.extend([toward.x as f32, toward.y as f32, toward.z as f32, sin_radius as f32]);
+            params.extend(sun.disk_radiance_rgb.map(|x| x as f32).into_iter().chain([1.0]));
+        }
+        false => params.extend([0.0; 8]),
+    }
+    Ok((params, active.into_iter().map(|p| p.0).collect()))
 }
