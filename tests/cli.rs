@@ -43,6 +43,13 @@ fn preview_refuses_what_is_not_a_bake() {
         assert!(text(&o).1.contains("built without the GPU preview"), "{}", text(&o).1);
     }
     assert!(!out.exists());
+    // A bad flag value is a usage error naming the flag (exit 2).
+    let o = sky(&["preview", "atmospheres/clear.toml", "--sun-elevation-deg", "10", "--camera", "pinhole", "--fov-deg", "200", "--out", out.to_str().unwrap()], c.path());
+    assert_eq!(o.status.code(), Some(2));
+    if cfg!(feature = "preview") {
+        assert!(text(&o).1.contains("--fov-deg"), "{}", text(&o).1);
+    }
+    assert!(!out.exists());
 }
 
 #[test]

@@ -100,23 +100,30 @@ pub struct SampleArgs {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
-pub(super) enum CameraKind {
+enum CameraKind {
     Fisheye,
     Equirect,
     Pinhole,
 }
 
-#[derive(Args, Debug)]
-pub struct DecodeArgs {
-    /// The bake's manifest.json
-    manifest: PathBuf,
-    #[command(flatten)]
-    conditions: Conditions,
+/// The OpenEXR header of a sky decoded from `manifest` under `c`.
+pub(super) fn decoded_metadata(generator: String, manifest: &std::path::Path, c: &Conditions) -> Vec<(String, String)> {
+    vec![
+        ("generator".to_string(), generator),
+        ("manifest".to_string(), manifest.display().to_string()),
+        ("sun_elevation_deg".to_string(), c.sun_elevation_deg.to_string()),
+        ("sun_azimuth_deg".to_string(), c.sun_azimuth_deg.to_string()),
+        ("haziness".to_string(), c.haziness.to_string()),
+        ("cloudiness".to_string(), c.cloudiness.to_string()),
+        ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2)".to_string()),
+    ]
+}
+
+/// The camera of a decoded image (`sky lut decode`, `sky preview`).
+#[derive(Args, Debug, Clone)]
+pub(super) struct ViewArgs {
     #[arg(long, value_enum, default_value = "fisheye")]
     camera: CameraKind,
-    /// Image size WIDTHxHEIGHT
-    #[arg(long, value_parser = super::render::parse_size, default_value = "256x256")]
-    size: (usize, usize),
     /// Pinhole: view azimuth, degrees
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     look_azimuth_deg: f64,
@@ -126,6 +133,33 @@ pub struct DecodeArgs {
     /// Pinhole: horizontal field of view, degrees
     #[arg(long, default_value_t = 90.0)]
     fov_deg: f64,
+}
+
+impl ViewArgs {
+    /// The camera, or a usage error naming the flag.
+    pub(super) fn camera(&self) -> Result<Camera> {
+        if !(self.fov_deg > 0.0 && self.fov_deg < 179.0) {
+            return usage(format!("--fov-deg must be between 0 and 179, got {}", self.fov_deg));
+        }
+        Ok(match self.camera {
+            CameraKind::Fisheye => Camera::Fisheye,
+            CameraKind::Equirect => Camera::Equirect,
+            CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: self.look_azimuth_deg, elevation_deg: self.look_elevation_deg, fov_deg: self.fov_deg },
+        })
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct DecodeArgs {
+    /// The bake's manifest.json
+    manifest: PathBuf,
+    #[command(flatten)]
+    conditions: Conditions,
+    #[command(flatten)]
+    view: ViewArgs,
+    /// Image size WIDTHxHEIGHT
+    #[arg(long, value_parser = super::render::parse_size, default_value = "256x256")]
+    size: (usize, usize),
     /// The OpenEXR to write (X, Y, Z; Y in cd/m^2)
     #[arg(long, value_name = "FILE.exr")]
     out: PathBuf,
@@ -242,16 +276,9 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
         LutCommand::FogFalloff(a) => super::lut_fog::run(a),
         LutCommand::Decode(a) => {
             check(&a.conditions)?;
-            if !(a.fov_deg > 0.0 && a.fov_deg < 179.0) {
-                return usage(format!("--fov-deg must be between 0 and 179, got {}", a.fov_deg));
-            }
+            let camera = a.view.camera()?;
             let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
             let c = &a.conditions;
-            let camera = match a.camera {
-                CameraKind::Fisheye => Camera::Fisheye,
-                CameraKind::Equirect => Camera::Equirect,
-                CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
-            };
             let (w, h) = a.size;
             if a.landscape {
                 if !(0.0..=1.0).contains(&a.cloud_occlusion) {
@@ -276,15 +303,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
             };
             let pixels = xyz.into_iter().map(PixelResult::from_xyz).collect();
             let image = Image { width: w, height: h, pixels };
-            let metadata = vec![
-                ("generator".to_string(), format!("sky {} lut decode", sky::VERSION)),
-                ("manifest".to_string(), a.manifest.display().to_string()),
-                ("sun_elevation_deg".to_string(), c.sun_elevation_deg.to_string()),
-                ("sun_azimuth_deg".to_string(), c.sun_azimuth_deg.to_string()),
-                ("haziness".to_string(), c.haziness.to_string()),
-                ("cloudiness".to_string(), c.cloudiness.to_string()),
-                ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2)".to_string()),
-            ];
+            let metadata = decoded_metadata(format!("sky {} lut decode", sky::VERSION), &a.manifest, c);
             output::write_exr(&a.out, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", a.out.display()))?;
             if let Some(p) = &a.png {
                 output::write_png(p, &image, a.exposure_ev, None).with_context(|| format!("writing {}", p.display()))?;

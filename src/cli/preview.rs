@@ -2,7 +2,7 @@
 //! Mesa's lavapipe), written as linear XYZ OpenEXR and a tonemapped PNG.
 //! Without the `preview` feature the command says how to get it.
 
-use super::lut::{CameraKind, Conditions};
+use super::lut::{Conditions, ViewArgs};
 use super::EXIT_USAGE;
 use anyhow::Result;
 use clap::Args;
@@ -15,20 +15,11 @@ pub struct PreviewArgs {
     manifest: PathBuf,
     #[command(flatten)]
     conditions: Conditions,
-    #[arg(long, value_enum, default_value = "fisheye")]
-    camera: CameraKind,
+    #[command(flatten)]
+    view: ViewArgs,
     /// Image size WIDTHxHEIGHT
     #[arg(long, value_parser = super::render::parse_size, default_value = "512x512")]
     size: (usize, usize),
-    /// Pinhole: view azimuth, degrees
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    look_azimuth_deg: f64,
-    /// Pinhole: view elevation, degrees
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
-    look_elevation_deg: f64,
-    /// Pinhole: horizontal field of view, degrees
-    #[arg(long, default_value_t = 90.0)]
-    fov_deg: f64,
     /// Output folder: sky.exr (CIE XYZ, Y in cd/m^2) and sky.png (tonemapped)
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
@@ -56,11 +47,11 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use sky::lut::decode::{mat_mul, pixel_directions};
     use sky::preview::gpu::Gpu;
     use sky::preview::sky_pass::{SkyPass, Weather};
-    use sky::render::camera::Camera;
     use sky::render::{output, Image, PixelResult};
 
     let _ = EXIT_USAGE;
     super::lut::check(&a.conditions)?;
+    let camera = a.view.camera()?;
     let (w, h) = a.size;
     if w == 0 || h == 0 {
         return super::usage("--size must be at least 1x1");
@@ -75,11 +66,6 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     };
     let pass = SkyPass::new(&gpu, &luts).context("preparing the sky pass")?;
     let c = &a.conditions;
-    let camera = match a.camera {
-        CameraKind::Fisheye => Camera::Fisheye,
-        CameraKind::Equirect => Camera::Equirect,
-        CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg },
-    };
     let dirs = pixel_directions(&camera, w, h);
     let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness, sun_disk: !a.no_sun_disk };
     let decoded = pass.decode(&gpu, &luts, &weather, &dirs).context("decoding the sky on the GPU")?;
@@ -88,15 +74,7 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     let image = Image { width: w, height: h, pixels };
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let (exr, png) = (a.out.join("sky.exr"), a.out.join("sky.png"));
-    let metadata = vec![
-        ("generator".to_string(), format!("sky {} preview ({})", sky::VERSION, gpu.describe())),
-        ("manifest".to_string(), a.manifest.display().to_string()),
-        ("sun_elevation_deg".to_string(), c.sun_elevation_deg.to_string()),
-        ("sun_azimuth_deg".to_string(), c.sun_azimuth_deg.to_string()),
-        ("haziness".to_string(), c.haziness.to_string()),
-        ("cloudiness".to_string(), c.cloudiness.to_string()),
-        ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2)".to_string()),
-    ];
+    let metadata = super::lut::decoded_metadata(format!("sky {} preview ({})", sky::VERSION, gpu.describe()), &a.manifest, c);
     output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
     output::write_png(&png, &image, a.exposure_ev, None).with_context(|| format!("writing {}", png.display()))?;
     if a.json {
