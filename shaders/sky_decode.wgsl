@@ -106,11 +106,7 @@ fn heading(y: f32, x: f32) -> f32 {
     if y == 0.0 {
         return select(0.0, PI, x < 0.0);
     }
-    let phi = atan2(y, x);
-    if phi < 0.0 {
-        return PI;
-    }
-    return min(phi, PI);
+    return clamp(atan2(y, x), 0.0, PI);
 }
 
 // DirectionMapping::uv_in_region, `d` in the frame with the sun at azimuth

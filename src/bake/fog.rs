@@ -136,14 +136,24 @@ pub fn to_render(sky: &super::SkySlices, fog: &FogSettings, cache: &SliceCache, 
 /// view `view` into the Fog (see [`lit_of_shadowed`]), timed on this
 /// process's threads: the forecast's share of a fog slice beside its render.
 pub fn time_quadrature(scene: &Scene, view: &View) -> f64 {
-    use rayon::prelude::*;
     let lit = View { fog: view.fog.map(|f| Fog { shadowed: false, ..f }), ..view.clone() };
-    let (w, h) = (lit.width, lit.height);
     let start = Instant::now();
-    let sum: f64 =
-        (0..w * h).into_par_iter().filter_map(|i| lit.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h)).map(|d| crate::render::single_by_quadrature(scene, &lit, d).0[1]).sum();
-    std::hint::black_box(sum);
+    std::hint::black_box(single_per_texel(scene, &lit));
     start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64
+}
+
+/// The quadrature's single scattering of sunlight toward each texel of
+/// `lit_view` (a Fog view), CIE XYZ, row-major; in parallel.
+fn single_per_texel(scene: &Scene, lit_view: &View) -> Vec<[f64; 3]> {
+    use rayon::prelude::*;
+    let (w, h) = (lit_view.width, lit_view.height);
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let dir = lit_view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h);
+            dir.map_or([0.0; 3], |d| crate::render::single_by_quadrature(scene, lit_view, d).0)
+        })
+        .collect()
 }
 
 /// The cache key of a basis sky's [`FogExtras`].
@@ -241,17 +251,9 @@ pub fn bake_fog(
 /// the samples, which the Fog's smaller relative error only improves. Its
 /// `core_seconds` are the quadrature's, on this process's threads.
 pub fn lit_of_shadowed(scene: &Scene, lit_view: &View, shadowed: &RenderedSlice) -> RenderedSlice {
-    use rayon::prelude::*;
     let start = Instant::now();
-    let (w, h) = (lit_view.width, lit_view.height);
-    let xyz = (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let dir = lit_view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h);
-            let single = dir.map_or([0.0; 3], |d| crate::render::single_by_quadrature(scene, lit_view, d).0);
-            std::array::from_fn(|c| shadowed.xyz[i][c] + single[c])
-        })
-        .collect();
+    let single = single_per_texel(scene, lit_view);
+    let xyz = shadowed.xyz.iter().zip(&single).map(|(s, q)| std::array::from_fn(|c| s[c] + q[c])).collect();
     RenderedSlice { xyz, core_seconds: start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64, ..shadowed.clone() }
 }
 

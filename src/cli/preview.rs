@@ -3,7 +3,6 @@
 //! Without the `preview` feature the command says how to get it.
 
 use super::lut::{Conditions, ViewArgs};
-use super::EXIT_USAGE;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -36,6 +35,7 @@ pub struct PreviewArgs {
 
 #[cfg(not(feature = "preview"))]
 pub fn run(_a: PreviewArgs) -> Result<ExitCode> {
+    use super::EXIT_USAGE;
     eprintln!("sky preview: this sky was built without the GPU preview (the `preview` feature, wgpu); build it with `make build` or `cargo build --release --features preview`; no output was written");
     Ok(ExitCode::from(EXIT_USAGE))
 }
@@ -49,7 +49,6 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use sky::preview::sky_pass::{SkyPass, Weather};
     use sky::render::{output, Image, PixelResult};
 
-    let _ = EXIT_USAGE;
     super::lut::check(&a.conditions)?;
     let camera = a.view.camera()?;
     let (w, h) = a.size;
