@@ -172,3 +172,77 @@ fn the_gpu_draws_the_sun_disk_the_cpu_decoder_draws() {
         assert!(inside > 50, "sun {e}: only {inside} pixels inside the disk");
     }
 }
+
+/// The landscape: the GPU's terrain and fog passes (after its sky pass)
+/// give the CPU reference `lut::landscape::landscape_toward`, toward a grid
+/// of directions from 6 degrees below the horizon to 4 above (every
+/// quarter degree, and every 3 degrees of azimuth: the five rows of ridges
+/// at 2 to 100 km and the sky above them), for suns high, low, at the
+/// horizon and below it, in weathers of one to three basis skies, with the
+/// air sunlit, half and wholly shaded by clouds.
+///
+/// Both sides see a ridge in the same directions, except within 1e-3
+/// degrees of a ridge's top (the profile's sines in f32 against f64), which
+/// are left out. On the ridges the tolerance is the sky pass's, 1e-3 of the
+/// value plus 1e-6 of the frame's brightest: the fog and attenuation are
+/// the same half floats on both sides, filtered by hand, and what differs
+/// is f32 arithmetic (the falloff's exponentials, the cube root of the
+/// depth, the geometric blend between slices); a texel, slice or depth
+/// mapping off misses by percents. The sky above the ridges is the sky
+/// pass's, tested above.
+#[test]
+fn the_gpu_landscape_is_the_cpu_decoders() {
+    use sky::lut::landscape::{landscape_toward, top_elevation_deg, RIDGES};
+    use sky::preview::frame::Frame;
+    use sky::preview::landscape::{Ground, LandscapePass};
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let (sky_pass, landscape) = (SkyPass::new(&gpu, luts).unwrap(), LandscapePass::new(&gpu, luts).unwrap());
+    let m = luts.manifest.colour.xyz_from_rgb;
+    let dirs: Vec<Option<DVec3>> = (0..=40).flat_map(|i| (0..120).map(move |j| Some(direction_deg(96.0 - 0.25 * i as f64, 3.0 * j as f64 + 0.7)))).collect();
+    let marginal = |d: &DVec3| {
+        let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
+        RIDGES.iter().any(|r| (elevation - top_elevation_deg(r, azimuth)).abs() < 1e-3)
+    };
+    let suns = [(35.0, 40.0), (8.0, 200.0), (0.5, 100.0), (-3.0, 300.0)];
+    let weathers = [(0.0, 0.0), (0.6, 0.25), (0.0, 0.3)];
+    let (mut compared, mut worst) = (0, 0.0f64);
+    for (n, &(e, az)) in suns.iter().enumerate() {
+        for (k, &(haziness, cloudiness)) in weathers.iter().enumerate() {
+            let cloud_occlusion = [0.0, 0.5, 1.0][(n + k) % 3];
+            let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness, cloudiness, sun_disk: false };
+            let ground = Ground { albedo: 0.15, cloud_occlusion };
+            let mut frame = Frame::new(&gpu, &dirs).unwrap();
+            sky_pass.encode(&gpu, &mut frame, luts, &weather).unwrap();
+            landscape.encode(&gpu, &mut frame, luts, &weather, &ground).unwrap();
+            let rendered = frame.finish().unwrap();
+            let cpu = landscape_toward(luts, &dirs, e, az, haziness, cloudiness, cloud_occlusion, 0.15).unwrap();
+            let brightest = cpu.iter().flatten().fold(0.0f64, |a, &x| a.max(x));
+            let mut ridges = 0;
+            for (i, d) in dirs.iter().enumerate() {
+                let d = d.unwrap();
+                if marginal(&d) {
+                    continue;
+                }
+                let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
+                let cpu_ridge = sky::lut::landscape::ridge_depth_km(elevation, azimuth);
+                let gpu_depth = rendered.surface[i][3];
+                assert_eq!(cpu_ridge.is_some(), gpu_depth > 0.0, "sun {e} at {az}: direction {i} ({elevation} deg up, {azimuth} round): the CPU sees a ridge at {cpu_ridge:?} km, the GPU at {gpu_depth} km");
+                if cpu_ridge.is_none() {
+                    continue;
+                }
+                ridges += 1;
+                let g = sky::lut::decode::mat_mul(&m, rendered.rgb[i].map(f64::from));
+                for c in 0..3 {
+                    let diff = (g[c] - cpu[i][c]).abs();
+                    assert!(diff <= 1e-3 * cpu[i][c].abs() + 1e-6 * brightest, "sun {e} at {az}, h {haziness}, c {cloudiness}, occlusion {cloud_occlusion}: direction {i} ({elevation} deg up, {azimuth} round), channel {c}: GPU {} against CPU {}", g[c], cpu[i][c]);
+                    worst = worst.max(diff / (cpu[i][c].abs() + 1e-6 * brightest));
+                    compared += 1;
+                }
+            }
+            assert!(ridges > 1000, "only {ridges} directions meet a ridge");
+        }
+    }
+    eprintln!("{compared} landscape values compared; largest difference {worst:.2e} of the value");
+}

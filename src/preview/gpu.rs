@@ -17,9 +17,12 @@ impl Gpu {
     pub fn new() -> Result<Gpu, PreviewError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(&instance, None)).map_err(|e| PreviewError::NoAdapter(e.to_string()))?;
+        // Timestamp queries where the adapter has them (lavapipe does), for
+        // per-pass GPU times; nothing else beyond the defaults.
+        let wanted = wgpu::Features::TIMESTAMP_QUERY;
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("sky preview"),
-            required_features: wgpu::Features::empty(),
+            required_features: adapter.features() & wanted,
             required_limits: wgpu::Limits::default(),
             ..Default::default()
         }))
@@ -33,6 +36,55 @@ impl Gpu {
         format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
     }
 
+    /// Whether the device writes timestamps (per-pass GPU times).
+    pub fn has_timestamps(&self) -> bool {
+        self.device.features().contains(wgpu::Features::TIMESTAMP_QUERY)
+    }
+
+    /// A 2-D array texture of `format` made from `bytes` (layer after
+    /// layer, rows of texels), as a view for `textureLoad`.
+    pub fn array_texture(&self, label: &str, format: wgpu::TextureFormat, width: usize, height: usize, layers: usize, bytes: &[u8]) -> Result<wgpu::TextureView, PreviewError> {
+        use wgpu::util::DeviceExt;
+        let size = wgpu::Extent3d { width: width as u32, height: height as u32, depth_or_array_layers: layers as u32 };
+        let texture = self.checked("texture upload", || {
+            self.device.create_texture_with_data(
+                &self.queue,
+                &wgpu::TextureDescriptor {
+                    label: Some(label),
+                    size,
+                    mip_level_count: 1,
+                    sample_count: 1,
+                    dimension: wgpu::TextureDimension::D2,
+                    format,
+                    usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                    view_formats: &[],
+                },
+                wgpu::util::TextureDataOrder::LayerMajor,
+                bytes,
+            )
+        })?;
+        Ok(texture.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() }))
+    }
+
+    /// A compute pipeline of `entry` in the WGSL `source`, with one bind
+    /// group of `entries`.
+    pub fn compute_pipeline(&self, label: &'static str, source: &str, entry: &str, entries: &[wgpu::BindGroupLayoutEntry]) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), PreviewError> {
+        self.checked(label, || {
+            let layout = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+            let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) });
+            let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some(label), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+            let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            });
+            (layout, pipeline)
+        })
+    }
+
     /// Runs `f` and turns a validation error it caused into a
     /// [`PreviewError::Validation`] naming `what`.
     pub fn checked<T>(&self, what: &'static str, f: impl FnOnce() -> T) -> Result<T, PreviewError> {
@@ -43,4 +95,30 @@ impl Gpu {
             None => Ok(value),
         }
     }
+}
+
+/// A compute shader's buffer binding: uniform, or storage read-only or not.
+pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    }
+}
+
+/// A compute shader's 2-D array texture binding, read by `textureLoad`
+/// (filtering is done by hand, in f32, as the CPU decoder does it).
+pub fn array_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D2Array, multisampled: false },
+        count: None,
+    }
+}
+
+/// The bytes of `values`, little-endian, for a uniform or storage buffer.
+pub fn f32_bytes(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|x| x.to_le_bytes()).collect()
 }

@@ -8,7 +8,9 @@
 //! (`lut::decode`) does and is tested against it by readback. Not yet: the
 //! global fog over a terrain, the clouds and their G-buffer, timelines.
 
+pub mod frame;
 pub mod gpu;
+pub mod landscape;
 pub mod sky_pass;
 
 /// What stops a preview.
@@ -35,8 +37,12 @@ pub enum PreviewError {
 pub mod shaders {
     /// The basis-sky decode (see `sky_pass`).
     pub const SKY_DECODE: &str = include_str!("../../shaders/sky_decode.wgsl");
+    /// The landscape's depth buffer and lit surfaces (see `landscape`).
+    pub const TERRAIN: &str = include_str!("../../shaders/terrain.wgsl");
+    /// The global fog in front of the landscape (see `landscape`).
+    pub const FOG: &str = include_str!("../../shaders/fog.wgsl");
     /// Every shader, by file name.
-    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE)];
+    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG)];
 }
 
 #[cfg(test)]

@@ -12,20 +12,17 @@
 //! Directions come from the CPU cameras (`render::camera`): one definition
 //! of the cameras for the renderer, the CPU decoder and the preview.
 
-use super::gpu::Gpu;
+use super::frame::{Frame, Rendered};
+use super::gpu::{array_entry, buffer_entry, Gpu};
 use super::PreviewError;
 use crate::lut::decode::{slice_pair, Luts};
 use crate::lut::weather::{basis_weights, BASIS};
 use crate::lut::{mapping, r11g11b10};
 use glam::DVec3;
-use std::time::Instant;
-use wgpu::util::DeviceExt;
 
 /// At most this many basis skies have weight at once (the weather rule's
 /// bound, `basis_weights`).
 pub const ACTIVE_SKIES: usize = 3;
-/// Invocations per workgroup (the shader's `@workgroup_size`).
-const WORKGROUP: u32 = 64;
 
 /// The sun and the weather of one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,13 +43,6 @@ pub struct SkyPass {
     pipeline: wgpu::ComputePipeline,
 }
 
-/// What a decode returns: linear RGB per direction (the manifest's colour
-/// space; 0 where there is no direction) and the GPU's wall time for it.
-pub struct Decoded {
-    pub rgb: Vec<[f32; 3]>,
-    pub seconds: f64,
-}
-
 impl SkyPass {
     /// Uploads every basis sky's array of `luts` and builds the pipeline.
     pub fn new(gpu: &Gpu, luts: &Luts) -> Result<SkyPass, PreviewError> {
@@ -65,119 +55,49 @@ impl SkyPass {
                     words.extend_from_slice(&w.to_le_bytes());
                 }
             }
-            let size = wgpu::Extent3d { width: entry.width as u32, height: entry.height as u32, depth_or_array_layers: entry.layers as u32 };
-            let t = gpu.checked("sky array", || {
-                gpu.device.create_texture_with_data(
-                    &gpu.queue,
-                    &wgpu::TextureDescriptor {
-                        label: Some(&entry.name),
-                        size,
-                        mip_level_count: 1,
-                        sample_count: 1,
-                        dimension: wgpu::TextureDimension::D2,
-                        format: wgpu::TextureFormat::Rg11b10Ufloat,
-                        usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-                        view_formats: &[],
-                    },
-                    wgpu::util::TextureDataOrder::LayerMajor,
-                    &words,
-                )
-            })?;
-            textures.push(t.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() }));
+            textures.push(gpu.array_texture(&entry.name, wgpu::TextureFormat::Rg11b10Ufloat, entry.width, entry.height, entry.layers, &words)?);
         }
         if textures.is_empty() {
             return Err(PreviewError::Bake("the bake has no basis sky".into()));
         }
-        let buffer = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
-            count: None,
-        };
-        let texture = |binding| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D2Array, multisampled: false },
-            count: None,
-        };
-        let entries = [
-            buffer(0, wgpu::BufferBindingType::Uniform),
-            buffer(1, wgpu::BufferBindingType::Storage { read_only: true }),
-            buffer(2, wgpu::BufferBindingType::Storage { read_only: false }),
-            texture(3),
-            texture(4),
-            texture(5),
-        ];
-        let (layout, pipeline) = gpu.checked("sky decode pipeline", || {
-            let layout = gpu.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some("sky decode"), entries: &entries });
-            let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some("sky_decode.wgsl"), source: wgpu::ShaderSource::Wgsl(super::shaders::SKY_DECODE.into()) });
-            let pipeline_layout = gpu.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some("sky decode"), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
-            let pipeline = gpu.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("sky decode"),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("decode"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-            (layout, pipeline)
-        })?;
+        use wgpu::BufferBindingType::{Storage, Uniform};
+        let entries = [buffer_entry(0, Uniform), buffer_entry(1, Storage { read_only: true }), buffer_entry(2, Storage { read_only: false }), array_entry(3), array_entry(4), array_entry(5)];
+        let (layout, pipeline) = gpu.compute_pipeline("sky decode", super::shaders::SKY_DECODE, "decode", &entries)?;
         Ok(SkyPass { textures, layout, pipeline })
     }
 
-    /// Linear RGB toward each of `dirs` (world frame, z up; None: no
-    /// direction, black) under `weather`, decoded on the GPU.
-    pub fn decode(&self, gpu: &Gpu, luts: &Luts, weather: &Weather, dirs: &[Option<DVec3>]) -> Result<Decoded, PreviewError> {
+    /// Records the sky pass into `frame`: linear RGB toward each direction
+    /// under `weather` into the frame's radiance buffer.
+    pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather) -> Result<(), PreviewError> {
         let (params, active) = frame_params(luts, weather)?;
-        let n = dirs.len().max(1);
-        let dir_data: Vec<f32> =
-            dirs.iter().flat_map(|d| d.map_or([0.0; 4], |d| [d.x as f32, d.y as f32, d.z as f32, 1.0])).chain(std::iter::repeat_n(0.0, if dirs.is_empty() { 4 } else { 0 })).collect();
-        let bytes = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
-        let size = (16 * n) as u64;
-        let start = Instant::now();
-        let readback = gpu.checked("sky decode", || {
-            let uniform = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("sky params"), contents: &bytes(&params), usage: wgpu::BufferUsages::UNIFORM });
-            let input = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("directions"), contents: &bytes(&dir_data), usage: wgpu::BufferUsages::STORAGE });
-            let output =
-                gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("radiance"), size, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
-            let readback =
-                gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("readback"), size, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let bind = gpu.checked("sky decode bind group", || {
+            let uniform = frame.uniform("sky params", &params);
             // Unused texture slots hold any array: their weight is 0 and the shader never reads them.
             let view = |k: usize| &self.textures[active.get(k).copied().unwrap_or(0)];
-            let bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("sky decode"),
                 layout: &self.layout,
                 entries: &[
                     wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 1, resource: input.as_entire_binding() },
-                    wgpu::BindGroupEntry { binding: 2, resource: output.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 1, resource: frame.directions.as_entire_binding() },
+                    wgpu::BindGroupEntry { binding: 2, resource: frame.radiance.as_entire_binding() },
                     wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(view(0)) },
                     wgpu::BindGroupEntry { binding: 4, resource: wgpu::BindingResource::TextureView(view(1)) },
                     wgpu::BindGroupEntry { binding: 5, resource: wgpu::BindingResource::TextureView(view(2)) },
                 ],
-            });
-            let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("sky decode") });
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("sky decode"), timestamp_writes: None });
-                pass.set_pipeline(&self.pipeline);
-                pass.set_bind_group(0, &bind, &[]);
-                pass.dispatch_workgroups((n as u32).div_ceil(WORKGROUP), 1, 1);
-            }
-            encoder.copy_buffer_to_buffer(&output, 0, &readback, 0, size);
-            gpu.queue.submit([encoder.finish()]);
-            readback
+            })
         })?;
-        let slice = readback.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            let _ = tx.send(r);
-        });
-        gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| PreviewError::Readback(e.to_string()))?;
-        rx.recv().map_err(|e| PreviewError::Readback(e.to_string()))?.map_err(|e| PreviewError::Readback(e.to_string()))?;
-        let seconds = start.elapsed().as_secs_f64();
-        let data = slice.get_mapped_range().map_err(|e| PreviewError::Readback(e.to_string()))?;
-        let rgb = data.chunks_exact(16).take(dirs.len()).map(|c| std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))).collect();
-        Ok(Decoded { rgb, seconds })
+        frame.dispatch("sky", &self.pipeline, &bind);
+        Ok(())
+    }
+
+    /// Linear RGB toward each of `dirs` (world frame, z up; None: no
+    /// direction, black) under `weather`, decoded on the GPU: a frame of
+    /// the sky pass alone.
+    pub fn decode(&self, gpu: &Gpu, luts: &Luts, weather: &Weather, dirs: &[Option<DVec3>]) -> Result<Rendered, PreviewError> {
+        let mut frame = Frame::new(gpu, dirs)?;
+        self.encode(gpu, &mut frame, luts, weather)?;
+        frame.finish()
     }
 }
 

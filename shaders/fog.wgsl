@@ -1,0 +1,169 @@
+// The global-fog pass: fog in front of the terrain, from the bake's Fog,
+// Shadowed Fog and Attenuation LUTs (the talk's "Global Fog
+// Approximation"). A transcription of the CPU reference decoder
+// (src/lut/decode_fog.rs `Luts::fog_of_sky`, the mappings of
+// src/lut/fog.rs), tested against it by readback (tests/preview.rs).
+//
+// Where the terrain pass found a surface (`surface[i].w`, its depth in km,
+// is positive) the picture becomes object * attenuation + fog, per basis
+// sky k weighted by the weather rule:
+// - fog: the Fog and Shadowed Fog LUTs read at the view's (u, v) (u the
+//   azimuth from the sun folded into 0..180 degrees, v the square root of
+//   elevation / 90 degrees; bilinear between texel centres at i / (n - 1)),
+//   each slice's scale undone, blended by the cloud occlusion, the sun's two
+//   slices interpolated as the sky's are (geometric where both are
+//   positive), times the talk's depth falloff
+//   (1 - e^(-k x)) / (1 - e^(-k)), k = a theta^p, x = depth / depth_max;
+// - attenuation: the Attenuation LUT at (x^(1/3), v).
+// Elsewhere the picture (the sky pass's) is left as it is.
+
+// header = (cos, sin of the sun's azimuth; number of active skies; cloud
+// occlusion in [0, 1]). Per active sky k, four rows:
+// sky[4k]     = (weight, fraction between slices, slice 0, slice 1),
+// sky[4k + 1] = (Fog scale of slice 0, of slice 1, Shadowed Fog scale of
+//                slice 0, of slice 1) (2^-scale_log2),
+// sky[4k + 2] = (falloff a, falloff p, Attenuation layer, 0),
+// sky[4k + 3] = (planet radius km, observer altitude km, ceiling km, 0).
+struct Params {
+    header: vec4<f32>,
+    sky: array<vec4<f32>, 12>,
+}
+
+@group(0) @binding(0) var<uniform> params: Params;
+@group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
+@group(0) @binding(2) var<storage, read> surface: array<vec4<f32>>;
+@group(0) @binding(3) var<storage, read_write> radiance: array<vec4<f32>>;
+@group(0) @binding(4) var lit0: texture_2d_array<f32>;
+@group(0) @binding(5) var shadowed0: texture_2d_array<f32>;
+@group(0) @binding(6) var lit1: texture_2d_array<f32>;
+@group(0) @binding(7) var shadowed1: texture_2d_array<f32>;
+@group(0) @binding(8) var lit2: texture_2d_array<f32>;
+@group(0) @binding(9) var shadowed2: texture_2d_array<f32>;
+@group(0) @binding(10) var attenuation: texture_2d_array<f32>;
+
+// Slot k's Fog (shadowed false) or Shadowed Fog (true) texel.
+fn fog_texel(k: u32, shadowed: bool, xy: vec2<i32>, layer: i32) -> vec3<f32> {
+    if k == 0u {
+        return select(textureLoad(lit0, xy, layer, 0), textureLoad(shadowed0, xy, layer, 0), shadowed).rgb;
+    } else if k == 1u {
+        return select(textureLoad(lit1, xy, layer, 0), textureLoad(shadowed1, xy, layer, 0), shadowed).rgb;
+    }
+    return select(textureLoad(lit2, xy, layer, 0), textureLoad(shadowed2, xy, layer, 0), shadowed).rgb;
+}
+
+// fog::bilinear_by's cell and weights: texel i of n at i / (n - 1).
+struct Cell {
+    ij: vec2<i32>,
+    f: vec2<f32>,
+}
+
+fn cell(uv: vec2<f32>, n: vec2<i32>) -> Cell {
+    let p = clamp(uv, vec2<f32>(0.0), vec2<f32>(1.0)) * vec2<f32>(n - 1);
+    let ij = min(vec2<i32>(p), n - 2);
+    return Cell(ij, p - vec2<f32>(ij));
+}
+
+fn fog_bilinear(k: u32, shadowed: bool, layer: i32, uv: vec2<f32>) -> vec3<f32> {
+    let c = cell(uv, vec2<i32>(textureDimensions(lit0)));
+    let a = fog_texel(k, shadowed, c.ij, layer);
+    let b = fog_texel(k, shadowed, c.ij + vec2<i32>(1, 0), layer);
+    let d = fog_texel(k, shadowed, c.ij + vec2<i32>(0, 1), layer);
+    let e = fog_texel(k, shadowed, c.ij + vec2<i32>(1, 1), layer);
+    return (1.0 - c.f.y) * ((1.0 - c.f.x) * a + c.f.x * b) + c.f.y * ((1.0 - c.f.x) * d + c.f.x * e);
+}
+
+fn attenuation_bilinear(layer: i32, uv: vec2<f32>) -> vec3<f32> {
+    let c = cell(uv, vec2<i32>(textureDimensions(attenuation)));
+    let a = textureLoad(attenuation, c.ij, layer, 0).rgb;
+    let b = textureLoad(attenuation, c.ij + vec2<i32>(1, 0), layer, 0).rgb;
+    let d = textureLoad(attenuation, c.ij + vec2<i32>(0, 1), layer, 0).rgb;
+    let e = textureLoad(attenuation, c.ij + vec2<i32>(1, 1), layer, 0).rgb;
+    return (1.0 - c.f.y) * ((1.0 - c.f.x) * a + c.f.x * b) + c.f.y * ((1.0 - c.f.x) * d + c.f.x * e);
+}
+
+// FogGeometry::depth_max_km for a view whose elevation has sine s (at
+// least 0): the distance to the ceiling, in the form without cancellation,
+// (rc^2 - r0^2) / (r0 s + sqrt(r0^2 s^2 + rc^2 - r0^2)) (the CPU's
+// -r0 s + sqrt(...) subtracts numbers of 6000 km in f32).
+fn depth_max_km(geometry: vec4<f32>, s: f32) -> f32 {
+    let r0 = geometry.x + geometry.y;
+    let rc = geometry.x + geometry.z;
+    let gap = (geometry.z - geometry.y) * (rc + r0);
+    return gap / (r0 * s + sqrt(r0 * r0 * s * s + max(gap, 0.0)));
+}
+
+// e^y - 1 without cancellation near 0 (WGSL has no expm1): three terms of
+// the series below |y| = 1e-2 (error below y^4 / 24 relative, 4e-10).
+fn expm1(y: f32) -> f32 {
+    if abs(y) < 1e-2 {
+        return y * (1.0 + y * (0.5 + y / 6.0));
+    }
+    return exp(y) - 1.0;
+}
+
+// Falloff::fraction.
+fn falloff(a: f32, p: f32, x: f32, theta: f32) -> f32 {
+    let k = a * pow(max(theta, 1e-6), p);
+    if !(abs(k) > 1e-9) {
+        return x;
+    }
+    return expm1(-k * x) / expm1(-k);
+}
+
+// decode::between_slices.
+fn between(a: f32, b: f32, f: f32) -> f32 {
+    if a > 0.0 && b > 0.0 {
+        return exp((1.0 - f) * log(a) + f * log(b));
+    }
+    return (1.0 - f) * a + f * b;
+}
+
+@compute @workgroup_size(64)
+fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
+    let i = id.x;
+    if i >= arrayLength(&directions) {
+        return;
+    }
+    let depth_km = surface[i].w;
+    if directions[i].w == 0.0 || depth_km <= 0.0 {
+        return;
+    }
+    let d = normalize(directions[i].xyz);
+    // The view in the frame with the sun at azimuth 0 (decode::rotate_to_sun_frame).
+    let c = params.header.x;
+    let s = params.header.y;
+    let sun_frame = vec3<f32>(c * d.x + s * d.y, -s * d.x + c * d.y, d.z);
+    let elevation_deg = degrees(asin(clamp(d.z, -1.0, 1.0)));
+    // fog::fog_uv: the azimuth from the sun folded into [0, 180] degrees.
+    let v = sqrt(clamp(elevation_deg, 0.0, 90.0) / 90.0);
+    let uv = vec2<f32>(abs(atan2(sun_frame.y, sun_frame.x)) / 3.14159265358979, v);
+    let sin_elevation = sin(radians(clamp(elevation_deg, 0.0, 90.0)));
+    let theta = clamp(elevation_deg, 0.5, 90.0) / 90.0;
+    let occlusion = clamp(params.header.w, 0.0, 1.0);
+    var inscatter = vec3<f32>(0.0);
+    var transmitted = vec3<f32>(0.0);
+    for (var k = 0u; k < u32(params.header.z); k++) {
+        let slices = params.sky[4u * k];
+        let scales = params.sky[4u * k + 1u];
+        let fit = params.sky[4u * k + 2u];
+        let geometry = params.sky[4u * k + 3u];
+        let lit_a = fog_bilinear(k, false, i32(slices.z), uv) * scales.x;
+        let shadowed_a = fog_bilinear(k, true, i32(slices.z), uv) * scales.z;
+        let lit_b = fog_bilinear(k, false, i32(slices.w), uv) * scales.y;
+        let shadowed_b = fog_bilinear(k, true, i32(slices.w), uv) * scales.w;
+        let a = (1.0 - occlusion) * lit_a + occlusion * shadowed_a;
+        let b = (1.0 - occlusion) * lit_b + occlusion * shadowed_b;
+        let t = slices.y;
+        let x = clamp(depth_km / depth_max_km(geometry, sin_elevation), 0.0, 1.0);
+        let fraction = falloff(fit.x, fit.y, x, theta);
+        let fog_k = vec3<f32>(between(a.x, b.x, t), between(a.y, b.y, t), between(a.z, b.z, t)) * fraction;
+        var u_depth = 0.0;
+        if x > 0.0 {
+            u_depth = pow(x, 1.0 / 3.0);
+        }
+        let attenuation_k = attenuation_bilinear(i32(fit.z), vec2<f32>(u_depth, v));
+        inscatter += slices.x * fog_k;
+        transmitted += slices.x * attenuation_k;
+    }
+    radiance[i] = vec4<f32>(surface[i].rgb * transmitted + inscatter, 1.0);
+}
