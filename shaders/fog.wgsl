@@ -43,12 +43,20 @@ struct Params {
 
 // Slot k's Fog (shadowed false) or Shadowed Fog (true) texel.
 fn fog_texel(k: u32, shadowed: bool, xy: vec2<i32>, layer: i32) -> vec3<f32> {
-    if k == 0u {
-        return select(textureLoad(lit0, xy, layer, 0), textureLoad(shadowed0, xy, layer, 0), shadowed).rgb;
-    } else if k == 1u {
-        return select(textureLoad(lit1, xy, layer, 0), textureLoad(shadowed1, xy, layer, 0), shadowed).rgb;
+    if shadowed {
+        if k == 0u {
+            return textureLoad(shadowed0, xy, layer, 0).rgb;
+        } else if k == 1u {
+            return textureLoad(shadowed1, xy, layer, 0).rgb;
+        }
+        return textureLoad(shadowed2, xy, layer, 0).rgb;
     }
-    return select(textureLoad(lit2, xy, layer, 0), textureLoad(shadowed2, xy, layer, 0), shadowed).rgb;
+    if k == 0u {
+        return textureLoad(lit0, xy, layer, 0).rgb;
+    } else if k == 1u {
+        return textureLoad(lit1, xy, layer, 0).rgb;
+    }
+    return textureLoad(lit2, xy, layer, 0).rgb;
 }
 
 // fog::bilinear_by's cell and weights: texel i of n at i / (n - 1).
@@ -79,6 +87,20 @@ fn attenuation_bilinear(layer: i32, uv: vec2<f32>) -> vec3<f32> {
     let d = textureLoad(attenuation, c.ij + vec2<i32>(0, 1), layer, 0).rgb;
     let e = textureLoad(attenuation, c.ij + vec2<i32>(1, 1), layer, 0).rgb;
     return (1.0 - c.f.y) * ((1.0 - c.f.x) * a + c.f.x * b) + c.f.y * ((1.0 - c.f.x) * d + c.f.x * e);
+}
+
+// One slice's fog blended by the cloud occlusion, each LUT's scale undone:
+// (1 - occlusion) Fog + occlusion Shadowed Fog, reading only the LUTs whose
+// weight is not 0.
+fn occluded(k: u32, layer: i32, uv: vec2<f32>, lit_scale: f32, shadowed_scale: f32, occlusion: f32) -> vec3<f32> {
+    var f = vec3<f32>(0.0);
+    if occlusion < 1.0 {
+        f += (1.0 - occlusion) * (fog_bilinear(k, false, layer, uv) * lit_scale);
+    }
+    if occlusion > 0.0 {
+        f += occlusion * (fog_bilinear(k, true, layer, uv) * shadowed_scale);
+    }
+    return f;
 }
 
 // FogGeometry::depth_max_km for a view whose elevation has sine s (at
@@ -147,13 +169,12 @@ fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
         let scales = params.sky[4u * k + 1u];
         let fit = params.sky[4u * k + 2u];
         let geometry = params.sky[4u * k + 3u];
-        let lit_a = fog_bilinear(k, false, i32(slices.z), uv) * scales.x;
-        let shadowed_a = fog_bilinear(k, true, i32(slices.z), uv) * scales.z;
-        let lit_b = fog_bilinear(k, false, i32(slices.w), uv) * scales.y;
-        let shadowed_b = fog_bilinear(k, true, i32(slices.w), uv) * scales.w;
-        let a = (1.0 - occlusion) * lit_a + occlusion * shadowed_a;
-        let b = (1.0 - occlusion) * lit_b + occlusion * shadowed_b;
         let t = slices.y;
+        let a = occluded(k, i32(slices.z), uv, scales.x, scales.z, occlusion);
+        var b = a;
+        if t > 0.0 {
+            b = occluded(k, i32(slices.w), uv, scales.y, scales.w, occlusion);
+        }
         let x = clamp(depth_km / depth_max_km(geometry, sin_elevation), 0.0, 1.0);
         let fraction = falloff(fit.x, fit.y, x, theta);
         let fog_k = vec3<f32>(between(a.x, b.x, t), between(a.y, b.y, t), between(a.z, b.z, t)) * fraction;

@@ -118,6 +118,8 @@ pub enum BenchCommand {
     /// converged reference, priced at the measured time per path to 1 %
     /// per texel and summed over the 64 slices
     Bake(super::bench_bake::BenchBakeArgs),
+    /// The GPU preview's passes timed by timestamp queries, the LUT sky pass against a plain textured full-screen pass in the same frames
+    Preview(super::bench_preview::BenchPreviewArgs),
     /// The farm's overhead and scaling, in one run: a plain local render (no
     /// coordinator) against the embedded worker and against one `sky worker`
     /// process on the same cores; then two single-thread workers against one.
@@ -408,6 +410,7 @@ pub fn run(c: BenchCommand) -> Result<ExitCode> {
             Ok(ExitCode::SUCCESS)
         }
         BenchCommand::Bake(a) => super::bench_bake::run(a),
+        BenchCommand::Preview(a) => super::bench_preview::run(a),
         BenchCommand::Farm { atmosphere, size, spp, threads, rounds, json } => {
             use sky::farm::coordinator::WorkerSpec;
             use sky::farm::job::{FarmJob, Optics};

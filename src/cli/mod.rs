@@ -17,6 +17,7 @@ mod atmosphere;
 mod bake;
 mod bench;
 mod bench_bake;
+mod bench_preview;
 mod farm_args;
 mod lut;
 mod lut_fog;

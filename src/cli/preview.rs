@@ -28,7 +28,16 @@ pub struct PreviewArgs {
     /// Leave out the sun's disk (drawn by default from the bake's sunlight where it covers pixel centres)
     #[arg(long)]
     no_sun_disk: bool,
-    /// Machine-readable summary on stdout (adapter, files, GPU time)
+    /// Leave out the landscape: ridges of mountains at 2 to 100 km, lit by the decoded sun and sky and seen through the global fog (drawn by default where the bake has fog LUTs)
+    #[arg(long)]
+    no_landscape: bool,
+    /// How much clouds shade the air in front of the landscape, 0 (the Fog LUT) to 1 (the Shadowed Fog LUT)
+    #[arg(long, default_value_t = 0.0)]
+    cloud_occlusion: f64,
+    /// The ridges' albedo
+    #[arg(long, default_value_t = 0.15)]
+    albedo: f64,
+    /// Machine-readable summary on stdout (adapter, files, wall and per-pass GPU times)
     #[arg(long)]
     json: bool,
 }
@@ -45,11 +54,19 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use super::EXIT_INVALID;
     use anyhow::Context;
     use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::preview::frame::Frame;
     use sky::preview::gpu::Gpu;
+    use sky::preview::landscape::{Ground, LandscapePass};
     use sky::preview::sky_pass::{SkyPass, Weather};
     use sky::render::{output, Image, PixelResult};
 
     super::lut::check(&a.conditions)?;
+    if !(0.0..=1.0).contains(&a.cloud_occlusion) {
+        return super::usage(format!("--cloud-occlusion must be from 0 to 1, got {}", a.cloud_occlusion));
+    }
+    if !(0.0..=1.0).contains(&a.albedo) {
+        return super::usage(format!("--albedo must be from 0 to 1, got {}", a.albedo));
+    }
     let camera = a.view.camera()?;
     let (w, h) = a.size;
     if w == 0 || h == 0 {
@@ -64,10 +81,24 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
         }
     };
     let pass = SkyPass::new(&gpu, &luts).context("preparing the sky pass")?;
+    let landscape = match (a.no_landscape, luts.manifest.fog.is_some()) {
+        (true, _) => None,
+        (false, true) => Some(LandscapePass::new(&gpu, &luts).context("preparing the landscape")?),
+        (false, false) => {
+            eprintln!("sky preview: {} has no fog LUTs (baked before them): the sky alone, without the landscape", a.manifest.display());
+            None
+        }
+    };
     let c = &a.conditions;
     let dirs = pixel_directions(&camera, w, h);
     let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness, sun_disk: !a.no_sun_disk };
-    let decoded = pass.decode(&gpu, &luts, &weather, &dirs).context("decoding the sky on the GPU")?;
+    let ground = Ground { albedo: a.albedo, cloud_occlusion: a.cloud_occlusion };
+    let mut frame = Frame::new(&gpu, &dirs)?;
+    pass.encode(&gpu, &mut frame, &luts, &weather).context("decoding the sky on the GPU")?;
+    if let Some(l) = &landscape {
+        l.encode(&gpu, &mut frame, &luts, &weather, &ground).context("drawing the landscape on the GPU")?;
+    }
+    let decoded = frame.finish().context("rendering on the GPU")?;
     let m = luts.manifest.colour.xyz_from_rgb;
     let pixels = decoded.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
     let image = Image { width: w, height: h, pixels };
@@ -82,11 +113,15 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             "files": [exr, png],
             "width": w,
             "height": h,
-            "sky_pass_seconds": decoded.seconds,
+            "landscape": landscape.is_some(),
+            "wall_seconds": decoded.seconds,
+            "gpu_pass_seconds": decoded.passes.iter().map(|(name, s)| (name.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
         });
         outln!("{summary}");
     } else {
-        eprintln!("sky preview: {w}x{h} decoded on {} in {:.1} ms, written to {} and {}", gpu.describe(), 1e3 * decoded.seconds, exr.display(), png.display());
+        let passes: Vec<String> = decoded.passes.iter().map(|(name, s)| format!("{name} {:.2} ms", 1e3 * s)).collect();
+        let passes = if passes.is_empty() { String::new() } else { format!(" (GPU: {})", passes.join(", ")) };
+        eprintln!("sky preview: {w}x{h} on {} in {:.1} ms{passes}, written to {} and {}", gpu.describe(), 1e3 * decoded.seconds, exr.display(), png.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -11,6 +11,7 @@
 pub mod frame;
 pub mod gpu;
 pub mod landscape;
+pub mod plain_pass;
 pub mod sky_pass;
 
 /// What stops a preview.
@@ -41,8 +42,10 @@ pub mod shaders {
     pub const TERRAIN: &str = include_str!("../../shaders/terrain.wgsl");
     /// The global fog in front of the landscape (see `landscape`).
     pub const FOG: &str = include_str!("../../shaders/fog.wgsl");
+    /// The benchmark's baseline, a plain textured pass (see `plain_pass`).
+    pub const PLAIN_TEXTURE: &str = include_str!("../../shaders/plain_texture.wgsl");
     /// Every shader, by file name.
-    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG)];
+    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG), ("plain_texture.wgsl", PLAIN_TEXTURE)];
 }
 
 #[cfg(test)]

@@ -66,6 +66,11 @@ impl SkyPass {
         Ok(SkyPass { textures, layout, pipeline })
     }
 
+    /// The GPU array of the manifest's sky `index`.
+    pub fn array(&self, index: usize) -> Option<&wgpu::TextureView> {
+        self.textures.get(index)
+    }
+
     /// Records the sky pass into `frame`: linear RGB toward each direction
     /// under `weather` into the frame's radiance buffer.
     pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather) -> Result<(), PreviewError> {
