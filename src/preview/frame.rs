@@ -148,7 +148,7 @@ impl<'g> Frame<'g> {
 }
 
 /// Waits for `buffer` to map and copies its bytes out.
-fn map(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, PreviewError> {
+pub(crate) fn map(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, PreviewError> {
     let slice = buffer.slice(..);
     let (tx, rx) = std::sync::mpsc::channel();
     slice.map_async(wgpu::MapMode::Read, move |r| {

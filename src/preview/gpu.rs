@@ -85,6 +85,50 @@ impl Gpu {
         })
     }
 
+    /// A compute pipeline of `entry` in `source` whose bind group layout
+    /// wgpu derives from the shader (`pipeline.get_bind_group_layout(0)`):
+    /// for modules of several entry points, each using some of the
+    /// bindings.
+    pub fn compute_pipeline_auto(&self, label: &'static str, module: &wgpu::ShaderModule, entry: &str) -> Result<wgpu::ComputePipeline, PreviewError> {
+        self.checked(label, || {
+            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor { label: Some(label), layout: None, module, entry_point: Some(entry), compilation_options: Default::default(), cache: None })
+        })
+    }
+
+    /// The shader module of WGSL `source`.
+    pub fn module(&self, label: &'static str, source: &str) -> Result<wgpu::ShaderModule, PreviewError> {
+        self.checked(label, || self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) }))
+    }
+
+    /// Submits `encoder` and reads `texture` (RGBA16F, one mip) back as
+    /// RGBA f32 texels, layer after layer, row after row.
+    pub fn read_rgba16f(&self, mut encoder: wgpu::CommandEncoder, texture: &wgpu::Texture) -> Result<Vec<[f32; 4]>, PreviewError> {
+        let size = texture.size();
+        let depth = match texture.dimension() {
+            wgpu::TextureDimension::D3 => size.depth_or_array_layers,
+            _ => size.depth_or_array_layers.max(1),
+        };
+        let row = (8 * size.width).div_ceil(256) * 256;
+        let bytes = u64::from(row) * u64::from(size.height) * u64::from(depth);
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("texture readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(size.height) } },
+            wgpu::Extent3d { width: size.width, height: size.height, depth_or_array_layers: depth },
+        );
+        self.checked("texture readback", || self.queue.submit([encoder.finish()]))?;
+        let data = super::frame::map(self, &buffer)?;
+        let mut out = Vec::with_capacity((size.width * size.height * depth) as usize);
+        for r in 0..(size.height * depth) as usize {
+            let line = &data[r * row as usize..];
+            for x in 0..size.width as usize {
+                let h: [u16; 4] = std::array::from_fn(|c| u16::from_le_bytes([line[8 * x + 2 * c], line[8 * x + 2 * c + 1]]));
+                out.push(crate::lut::rgba16f::unpack(h));
+            }
+        }
+        Ok(out)
+    }
+
     /// Runs `f` and turns a validation error it caused into a
     /// [`PreviewError::Validation`] naming `what`.
     pub fn checked<T>(&self, what: &'static str, f: impl FnOnce() -> T) -> Result<T, PreviewError> {

@@ -8,6 +8,7 @@
 //! (`lut::decode`) does and is tested against it by readback. Not yet: the
 //! global fog over a terrain, the clouds and their G-buffer, timelines.
 
+pub mod cloud_noise;
 pub mod frame;
 pub mod gpu;
 pub mod landscape;
@@ -44,8 +45,10 @@ pub mod shaders {
     pub const FOG: &str = include_str!("../../shaders/fog.wgsl");
     /// The benchmark's baseline, a plain textured pass (see `plain_pass`).
     pub const PLAIN_TEXTURE: &str = include_str!("../../shaders/plain_texture.wgsl");
+    /// The clouds' noise textures (see `cloud_noise`).
+    pub const CLOUD_NOISE: &str = include_str!("../../shaders/cloud_noise.wgsl");
     /// Every shader, by file name.
-    pub const ALL: &[(&str, &str)] = &[("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG), ("plain_texture.wgsl", PLAIN_TEXTURE)];
+    pub const ALL: &[(&str, &str)] = &[("cloud_noise.wgsl", CLOUD_NOISE), ("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG), ("plain_texture.wgsl", PLAIN_TEXTURE)];
 }
 
 #[cfg(test)]
