@@ -228,7 +228,11 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
                 let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
                 let cpu_ridge = sky::lut::landscape::ridge_depth_km(elevation, azimuth);
                 let gpu_depth = rendered.surface[i][3];
-                assert_eq!(cpu_ridge.is_some(), gpu_depth > 0.0, "sun {e} at {az}: direction {i} ({elevation} deg up, {azimuth} round): the CPU sees a ridge at {cpu_ridge:?} km, the GPU at {gpu_depth} km");
+                assert_eq!(
+                    cpu_ridge.is_some(),
+                    gpu_depth > 0.0,
+                    "sun {e} at {az}: direction {i} ({elevation} deg up, {azimuth} round): the CPU sees a ridge at {cpu_ridge:?} km, the GPU at {gpu_depth} km"
+                );
                 if cpu_ridge.is_none() {
                     continue;
                 }
@@ -236,7 +240,12 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
                 let g = sky::lut::decode::mat_mul(&m, rendered.rgb[i].map(f64::from));
                 for c in 0..3 {
                     let diff = (g[c] - cpu[i][c]).abs();
-                    assert!(diff <= 1e-3 * cpu[i][c].abs() + 1e-6 * brightest, "sun {e} at {az}, h {haziness}, c {cloudiness}, occlusion {cloud_occlusion}: direction {i} ({elevation} deg up, {azimuth} round), channel {c}: GPU {} against CPU {}", g[c], cpu[i][c]);
+                    assert!(
+                        diff <= 1e-3 * cpu[i][c].abs() + 1e-6 * brightest,
+                        "sun {e} at {az}, h {haziness}, c {cloudiness}, occlusion {cloud_occlusion}: direction {i} ({elevation} deg up, {azimuth} round), channel {c}: GPU {} against CPU {}",
+                        g[c],
+                        cpu[i][c]
+                    );
                     worst = worst.max(diff / (cpu[i][c].abs() + 1e-6 * brightest));
                     compared += 1;
                 }

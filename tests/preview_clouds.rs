@@ -74,3 +74,90 @@ fn the_noise_textures_tile_and_the_low_one_has_zero_mean() {
     let again = CloudNoise::new(&gpu, 7).unwrap();
     assert_eq!(CloudNoise::read(&gpu, &again.low).unwrap(), low, "the same seed built a different texture");
 }
+
+/// The cloud G-buffer's invariants, for a sun high, low and below the
+/// horizon and three covers: no NaN or infinity; opacity in [0, 1];
+/// where a texel is opaque at all its distance lies in the cloud layer's
+/// reach (from the base overhead, 1.5 km, to the far edge of the
+/// cumulus map, under 200 km); sun and ambient in-scatter not negative,
+/// and the ambient no more than the opacity (it is the opacity weighted by
+/// shares of at most 1). With no cover the sky is clear: opacity 0
+/// everywhere; at a cover of 0.3 some texels are clouds and some are sky;
+/// more cover, more cloudy texels.
+#[test]
+fn the_cloud_gbuffer_keeps_its_invariants() {
+    use sky::preview::clouds::{default_coverage, CloudSettings, Clouds};
+    use sky::preview::sky_pass::Weather;
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let clouds = Clouds::new(&gpu, &default_coverage(), 64, 1).unwrap();
+    for (e, az) in [(40.0, 10.0), (3.0, 250.0), (-4.0, 90.0)] {
+        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
+        let mut cloudy_by_cover = Vec::new();
+        for cover in [0.0, 0.3, 0.7] {
+            let settings = CloudSettings { cover, gbuffer_size: 64, samples: 1, steps: 32, ..CloudSettings::default() };
+            clouds.compute(&gpu, &weather, &settings, 0).unwrap();
+            let g = clouds.read_gbuffer(&gpu).unwrap();
+            assert_eq!(g.len(), 64 * 64);
+            let (mut cloudy, mut clear) = (0, 0);
+            for (i, t) in g.iter().enumerate() {
+                let [opacity, distance_km, sun, ambient] = *t;
+                let at = format!("sun {e}, cover {cover}, texel {i}: {t:?}");
+                assert!(t.iter().all(|x| x.is_finite()), "{at}: not finite");
+                assert!((0.0..=1.0).contains(&opacity), "{at}: opacity outside [0, 1]");
+                assert!(sun >= 0.0 && ambient >= 0.0 && ambient <= opacity + 1e-3, "{at}: in-scatter out of range");
+                if opacity > 1e-3 {
+                    assert!((1.4..200.0).contains(&distance_km), "{at}: distance outside the layer's reach");
+                    cloudy += 1;
+                } else {
+                    clear += 1;
+                }
+            }
+            if cover == 0.0 {
+                assert_eq!(cloudy, 0, "sun {e}: clouds with no cover");
+            }
+            if cover == 0.3 {
+                assert!(cloudy > 100 && clear > 100, "sun {e}, cover {cover}: {cloudy} cloudy and {clear} clear texels");
+            }
+            cloudy_by_cover.push(cloudy);
+        }
+        assert!(cloudy_by_cover.windows(2).all(|w| w[0] < w[1]), "sun {e}: cloudy texels by cover 0, 0.3, 0.7: {cloudy_by_cover:?}");
+    }
+}
+
+/// The G-buffer's Monte Carlo converges: the mean of N jittered marches
+/// per texel (N = 1, 4, 16) comes closer to a G-buffer of 64 independent
+/// marches as N grows, its RMS difference in opacity and sun in-scatter
+/// falling by at least a third with each fourfold N (1/sqrt(N) would halve
+/// it; the reference's own noise, 1/8 of one march's, keeps the last
+/// step from halving exactly). This is the convergence the amortised
+/// G-buffer relies on when it spreads the marches over frames (the
+/// amortisation itself is not built yet).
+#[test]
+fn the_cloud_gbuffer_converges_with_samples() {
+    use sky::preview::clouds::{default_coverage, CloudSettings, Clouds};
+    use sky::preview::sky_pass::Weather;
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let clouds = Clouds::new(&gpu, &default_coverage(), 48, 1).unwrap();
+    let weather = Weather { sun_elevation_deg: 30.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
+    let run = |samples: u32, first: u32| {
+        let settings = CloudSettings { cover: 0.5, gbuffer_size: 48, samples, steps: 32, ..CloudSettings::default() };
+        clouds.compute(&gpu, &weather, &settings, first).unwrap();
+        clouds.read_gbuffer(&gpu).unwrap()
+    };
+    let reference = run(64, 1_000_000);
+    let rms = |g: &[[f32; 4]], c: usize| (g.iter().zip(&reference).map(|(a, b)| ((a[c] - b[c]) as f64).powi(2)).sum::<f64>() / g.len() as f64).sqrt();
+    let mut previous: Option<[f64; 2]> = None;
+    for n in [1, 4, 16] {
+        let g = run(n, 0);
+        let now = [rms(&g, 0), rms(&g, 2)];
+        eprintln!("{n} marches a texel: RMS difference to 64, opacity {:.4}, sun in-scatter {:.5}", now[0], now[1]);
+        if let Some(p) = previous {
+            for c in 0..2 {
+                assert!(now[c] < 0.67 * p[c], "{n} marches: RMS difference {} against {} with a quarter of them", now[c], p[c]);
+            }
+        }
+        previous = Some(now);
+    }
+}

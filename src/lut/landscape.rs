@@ -69,16 +69,7 @@ pub fn decode_landscape(
 /// [`decode_landscape`] toward each of `dirs` (world frame, z up; None:
 /// black).
 #[allow(clippy::too_many_arguments)]
-pub fn landscape_toward(
-    luts: &Luts,
-    dirs: &[Option<DVec3>],
-    sun_elevation_deg: f64,
-    sun_azimuth_deg: f64,
-    haziness: f64,
-    cloudiness: f64,
-    cloud_occlusion: f64,
-    albedo: f64,
-) -> Option<Vec<[f64; 3]>> {
+pub fn landscape_toward(luts: &Luts, dirs: &[Option<DVec3>], sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, cloud_occlusion: f64, albedo: f64) -> Option<Vec<[f64; 3]>> {
     luts.manifest.fog.as_ref()?;
     let sun = luts.sun(sun_elevation_deg, haziness, cloudiness)?;
     let ambient = luts.ambient(sun_elevation_deg, haziness, cloudiness)?;

@@ -51,8 +51,15 @@ impl CloudNoise {
         let (low, high) = (texture("low-frequency noise", LOW_SIZE)?, texture("high-frequency noise", HIGH_SIZE)?);
         let count = LOW_SIZE.pow(3);
         let params = |size: u32| [size, seed, CHUNK, size.pow(3)];
-        let uniform = |p: [u32; 4]| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("noise params"), contents: &p.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(), usage: wgpu::BufferUsages::UNIFORM });
-        let storage = |label, n: u32| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(&vec![0.0; n as usize]), usage: wgpu::BufferUsages::STORAGE });
+        let uniform = |p: [u32; 4]| {
+            gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("noise params"),
+                contents: &p.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
+                usage: wgpu::BufferUsages::UNIFORM,
+            })
+        };
+        let storage =
+            |label, n: u32| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(&vec![0.0; n as usize]), usage: wgpu::BufferUsages::STORAGE });
         let (low_params, high_params) = (uniform(params(LOW_SIZE)), uniform(params(HIGH_SIZE)));
         let (values, partial) = (storage("noise values", count), storage("noise partial sums", count / CHUNK));
         let (low_view, high_view) = (low.create_view(&Default::default()), high.create_view(&Default::default()));

@@ -65,7 +65,8 @@ impl<'g> Frame<'g> {
         let size = 4 * data.len() as u64;
         let (directions, surface, radiance, queries) = gpu.checked("frame buffers", || {
             let directions = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("directions"), contents: &f32_bytes(&data), usage: wgpu::BufferUsages::STORAGE });
-            let storage = |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
+            let storage =
+                |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
             let queries = gpu.has_timestamps().then(|| gpu.device.create_query_set(&wgpu::QuerySetDescriptor { label: Some("pass times"), ty: wgpu::QueryType::Timestamp, count: 2 * MAX_TIMED }));
             (directions, storage("surface"), storage("radiance"), queries)
         })?;
@@ -112,15 +113,26 @@ impl<'g> Frame<'g> {
         let gpu = self.gpu;
         let size = self.radiance.size();
         let timed = (self.passes.len() as u32).min(MAX_TIMED);
-        let readback = |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let readback =
+            |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
         let (rgb_back, surface_back) = (readback("radiance readback"), readback("surface readback"));
         self.encoder.copy_buffer_to_buffer(&self.radiance, 0, &rgb_back, 0, size);
         self.encoder.copy_buffer_to_buffer(&self.surface, 0, &surface_back, 0, size);
         let times_back = match (&self.queries, timed) {
             (Some(q), 1..) => {
                 let bytes = 16 * timed as u64;
-                let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("pass times"), size: bytes, usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
-                let back = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("pass times readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+                let resolve = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pass times"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                });
+                let back = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some("pass times readback"),
+                    size: bytes,
+                    usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                });
                 self.encoder.resolve_query_set(q, 0..2 * timed, &resolve, 0);
                 self.encoder.copy_buffer_to_buffer(&resolve, 0, &back, 0, bytes);
                 Some(back)
@@ -132,7 +144,8 @@ impl<'g> Frame<'g> {
         let rgb_bytes = map(gpu, &rgb_back)?;
         let surface_bytes = map(gpu, &surface_back)?;
         let seconds = self.start.elapsed().as_secs_f64();
-        let floats = |b: &[u8]| b.chunks_exact(16).take(self.count).map(|c| std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))).collect::<Vec<[f32; 4]>>();
+        let floats =
+            |b: &[u8]| b.chunks_exact(16).take(self.count).map(|c| std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))).collect::<Vec<[f32; 4]>>();
         let rgb = floats(&rgb_bytes).into_iter().map(|v| [v[0], v[1], v[2]]).collect();
         let surface = floats(&surface_bytes);
         let mut passes = Vec::new();

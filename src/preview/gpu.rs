@@ -91,7 +91,14 @@ impl Gpu {
     /// bindings.
     pub fn compute_pipeline_auto(&self, label: &'static str, module: &wgpu::ShaderModule, entry: &str) -> Result<wgpu::ComputePipeline, PreviewError> {
         self.checked(label, || {
-            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor { label: Some(label), layout: None, module, entry_point: Some(entry), compilation_options: Default::default(), cache: None })
+            self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: None,
+                module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
         })
     }
 
@@ -110,7 +117,12 @@ impl Gpu {
         };
         let row = (8 * size.width).div_ceil(256) * 256;
         let bytes = u64::from(row) * u64::from(size.height) * u64::from(depth);
-        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor { label: Some("texture readback"), size: bytes, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("texture readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         encoder.copy_texture_to_buffer(
             texture.as_image_copy(),
             wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(size.height) } },
@@ -143,12 +155,7 @@ impl Gpu {
 
 /// A compute shader's buffer binding: uniform, or storage read-only or not.
 pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry {
-        binding,
-        visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
-        count: None,
-    }
+    wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None }, count: None }
 }
 
 /// A compute shader's 2-D array texture binding, read by `textureLoad`

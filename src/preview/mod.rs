@@ -9,6 +9,7 @@
 //! global fog over a terrain, the clouds and their G-buffer, timelines.
 
 pub mod cloud_noise;
+pub mod clouds;
 pub mod frame;
 pub mod gpu;
 pub mod landscape;
@@ -47,8 +48,20 @@ pub mod shaders {
     pub const PLAIN_TEXTURE: &str = include_str!("../../shaders/plain_texture.wgsl");
     /// The clouds' noise textures (see `cloud_noise`).
     pub const CLOUD_NOISE: &str = include_str!("../../shaders/cloud_noise.wgsl");
+    /// The cumulus map, shadow volume and cloud G-buffer (see `clouds`).
+    pub const CLOUDS: &str = include_str!("../../shaders/clouds.wgsl");
+    /// The G-buffer's deferred lighting (see `clouds`).
+    pub const CLOUD_LIGHTING: &str = include_str!("../../shaders/cloud_lighting.wgsl");
     /// Every shader, by file name.
-    pub const ALL: &[(&str, &str)] = &[("cloud_noise.wgsl", CLOUD_NOISE), ("sky_decode.wgsl", SKY_DECODE), ("terrain.wgsl", TERRAIN), ("fog.wgsl", FOG), ("plain_texture.wgsl", PLAIN_TEXTURE)];
+    pub const ALL: &[(&str, &str)] = &[
+        ("cloud_noise.wgsl", CLOUD_NOISE),
+        ("clouds.wgsl", CLOUDS),
+        ("cloud_lighting.wgsl", CLOUD_LIGHTING),
+        ("sky_decode.wgsl", SKY_DECODE),
+        ("terrain.wgsl", TERRAIN),
+        ("fog.wgsl", FOG),
+        ("plain_texture.wgsl", PLAIN_TEXTURE),
+    ];
 }
 
 #[cfg(test)]

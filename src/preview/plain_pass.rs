@@ -32,12 +32,7 @@ impl PlainPass {
             wgpu::BindGroupLayoutEntry { binding: 3, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering), count: None },
         ];
         let (layout, pipeline) = gpu.compute_pipeline("plain texture", super::shaders::PLAIN_TEXTURE, "plain", &entries)?;
-        let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
-            label: Some("linear"),
-            mag_filter: wgpu::FilterMode::Linear,
-            min_filter: wgpu::FilterMode::Linear,
-            ..Default::default()
-        });
+        let sampler = gpu.device.create_sampler(&wgpu::SamplerDescriptor { label: Some("linear"), mag_filter: wgpu::FilterMode::Linear, min_filter: wgpu::FilterMode::Linear, ..Default::default() });
         Ok(PlainPass { texture, sampler, layout, pipeline })
     }
 
