@@ -10,7 +10,9 @@
 
 const PI: f32 = 3.14159265358979;
 
-// sun_irradiance.rgb; ambient_radiance.rgb.
+// sun_irradiance.rgb; ambient_radiance.rgb, w: how far the display has
+// moved from the previous G-buffer to the current one (the talk:
+// "interpolation between two buffers while switching").
 struct Params {
     sun_irradiance: vec4<f32>,
     ambient_radiance: vec4<f32>,
@@ -21,6 +23,7 @@ struct Params {
 @group(0) @binding(2) var<storage, read_write> radiance: array<vec4<f32>>;
 @group(0) @binding(3) var gbuffer: texture_2d<f32>;
 @group(0) @binding(4) var clamped: sampler;
+@group(0) @binding(5) var previous: texture_2d<f32>;
 
 // The G-buffer's (u, v) of a direction (theta from the zenith, phi): the
 // inverse of gbufferUVtoPolarCoordinates, |uv - 0.5| = R(phi) (theta / (pi/2))^2.
@@ -42,7 +45,8 @@ fn light(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let theta = atan2(length(dir.xy), dir.z);
     let phi = atan2(dir.y, dir.x);
-    let g = textureSampleLevel(gbuffer, clamped, gbuffer_uv(theta, phi), 0.0);
+    let uv = gbuffer_uv(theta, phi);
+    let g = mix(textureSampleLevel(previous, clamped, uv, 0.0), textureSampleLevel(gbuffer, clamped, uv, 0.0), params.ambient_radiance.w);
     let sky = radiance[i].rgb;
     let clouds = g.z * params.sun_irradiance.rgb + g.w * params.ambient_radiance.rgb;
     radiance[i] = vec4<f32>(sky * (1.0 - clamp(g.x, 0.0, 1.0)) + clouds, 1.0);

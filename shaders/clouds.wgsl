@@ -31,6 +31,9 @@ struct Params {
     optics: vec4<f32>,
     // (first sample index; seed; march steps; 0)
     frame: vec4<f32>,
+    // The amortised G-buffer's (frame in the cycle, frames per sample,
+    // first sample number, clear after resolving: 1).
+    tiles: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -221,10 +224,91 @@ fn to_sphere(d: vec3<f32>, r: f32) -> f32 {
     return gap / (b + sqrt(b * b + gap));
 }
 
-// One G-buffer texel, averaged over `samples` jittered marches:
-// (opacity to the sky, distance to the clouds km, sun in-scatter per unit
-// of sun irradiance (1/sr), ambient in-scatter per unit of the sky's
-// mean radiance).
+// One jittered march for G-buffer texel `texel` of an n x n buffer,
+// numbered `sample` (its jitter within the texel and along the ray):
+// (opacity to the sky, the absorbed-weighted sum of distances km, sun
+// in-scatter per unit of sun irradiance (1/sr), ambient in-scatter per unit
+// of the sky's mean radiance). The distance to the clouds is the second
+// over the first.
+fn march(texel: vec2<u32>, n: vec2<u32>, sample: u32) -> vec4<f32> {
+    let steps = u32(params.frame.z);
+    let sun = params.sun.xyz;
+    let a = params.optics.y;
+    let b = params.optics.z;
+    let c = params.optics.w;
+    let j = vec2<f32>(pcg3d(vec3<u32>(texel, sample)).xy >> vec2<u32>(8u)) / 16777216.0;
+    let polar = gbuffer_polar((vec2<f32>(texel) + j) / vec2<f32>(n));
+    let d = vec3<f32>(sin(polar.x) * cos(polar.y), sin(polar.x) * sin(polar.y), cos(polar.x));
+    let t0 = to_sphere(d, params.planet.x + params.planet.y);
+    let t1 = min(to_sphere(d, params.planet.x + params.planet.z), t0 + 1.5 * params.planet.w);
+    let dt = (t1 - t0) / f32(steps);
+    let cos_sun = dot(d, sun);
+    var transmittance = 1.0;
+    var sun_light = 0.0;
+    var ambient = 0.0;
+    var distance = 0.0;
+    let jitter = fract(j.x + j.y * 1.618034);
+    for (var k = 0u; k < steps; k++) {
+        let t = t0 + (f32(k) + jitter) * dt;
+        let p = d * t;
+        let cov = coverage_at(p);
+        let rho = density(p, cov);
+        if rho <= 0.0 {
+            continue;
+        }
+        let extinction = rho * params.optics.x;
+        // Energy-conserving step (Hillaire 2016): the in-scatter times
+        // (1 - e^(-sigma dt)) / sigma, here with albedo 1.
+        let absorbed = transmittance * (1.0 - exp(-extinction * dt));
+        // Toward the sun: six detailed steps over the first 4 km, then the
+        // distant-cloud shadow volume.
+        var tau = 0.0;
+        if sun.z > -0.2 {
+            var along = 0.0;
+            for (var m = 0; m < 6; m++) {
+                let step = NEAR_SHADOW_KM * (f32(m) + 1.0) / 21.0;
+                let q = p + sun * (along + 0.5 * step);
+                tau += density(q, coverage_at(q)) * params.optics.x * step;
+                along += step;
+            }
+        }
+        let far = far_shadow(p);
+        // Wrenninge et al. 2013's multiple-scattering octaves: octave i
+        // scatters b^i, is extinguished a^i, with the phase's eccentricity
+        // c^i; a <= b keeps the sum within the energy of single
+        // scattering's albedo-1 limit (Hillaire 2016).
+        var octaves = 0.0;
+        var ai = 1.0;
+        var bi = 1.0;
+        var ci = 1.0;
+        for (var i = 0; i < 3; i++) {
+            octaves += bi * henyey_greenstein(cos_sun, 0.6 * ci) * exp(-ai * tau) * pow(far, ai);
+            ai *= a;
+            bi *= b;
+            ci *= c;
+        }
+        sun_light += absorbed * octaves;
+        ambient += absorbed * cov.a;
+        distance += absorbed * t;
+        transmittance *= exp(-extinction * dt);
+        if transmittance < 1e-3 {
+            break;
+        }
+    }
+    return vec4<f32>(1.0 - transmittance, distance, sun_light, ambient);
+}
+
+// The G-buffer texel from sums of marches and their count.
+fn texel_of(sum: vec4<f32>, count: f32) -> vec4<f32> {
+    var distance = 0.0;
+    if sum.x > 0.0 {
+        distance = sum.y / sum.x;
+    }
+    return vec4<f32>(sum.x / count, distance, sum.z / count, sum.w / count);
+}
+
+// The whole G-buffer at once: each texel the mean of `samples` marches
+// numbered from params.frame.x.
 @compute @workgroup_size(8, 8)
 fn gbuffer(@builtin(global_invocation_id) id: vec3<u32>) {
     let n = textureDimensions(gbuffer_out);
@@ -232,81 +316,69 @@ fn gbuffer(@builtin(global_invocation_id) id: vec3<u32>) {
         return;
     }
     let samples = u32(params.wind.w);
-    let steps = u32(params.frame.z);
-    let sun = params.sun.xyz;
-    let a = params.optics.y;
-    let b = params.optics.z;
-    let c = params.optics.w;
     var sum = vec4<f32>(0.0);
-    var weighted_distance = 0.0;
     for (var s = 0u; s < samples; s++) {
-        let j = vec2<f32>(pcg3d(vec3<u32>(id.xy, u32(params.frame.x) + s)).xy >> vec2<u32>(8u)) / 16777216.0;
-        let polar = gbuffer_polar((vec2<f32>(id.xy) + j) / vec2<f32>(n));
-        let d = vec3<f32>(sin(polar.x) * cos(polar.y), sin(polar.x) * sin(polar.y), cos(polar.x));
-        let t0 = to_sphere(d, params.planet.x + params.planet.y);
-        let t1 = min(to_sphere(d, params.planet.x + params.planet.z), t0 + 1.5 * params.planet.w);
-        let dt = (t1 - t0) / f32(steps);
-        let cos_sun = dot(d, sun);
-        var transmittance = 1.0;
-        var sun_light = 0.0;
-        var ambient = 0.0;
-        var distance = 0.0;
-        let jitter = fract(j.x + j.y * 1.618034);
-        for (var k = 0u; k < steps; k++) {
-            let t = t0 + (f32(k) + jitter) * dt;
-            let p = d * t;
-            let cov = coverage_at(p);
-            let rho = density(p, cov);
-            if rho <= 0.0 {
-                continue;
-            }
-            let extinction = rho * params.optics.x;
-            // Energy-conserving step (Hillaire 2016): the in-scatter times
-            // (1 - e^(-sigma dt)) / sigma, here with albedo 1.
-            let absorbed = transmittance * (1.0 - exp(-extinction * dt));
-            // Toward the sun: six detailed steps over the first 4 km, then
-            // the distant-cloud shadow volume.
-            var tau = 0.0;
-            if sun.z > -0.2 {
-                var along = 0.0;
-                for (var m = 0; m < 6; m++) {
-                    let step = NEAR_SHADOW_KM * (f32(m) + 1.0) / 21.0;
-                    let q = p + sun * (along + 0.5 * step);
-                    tau += density(q, coverage_at(q)) * params.optics.x * step;
-                    along += step;
-                }
-            }
-            let far = far_shadow(p);
-            // Wrenninge et al. 2013's multiple-scattering octaves: octave i
-            // scatters b^i, is extinguished a^i, with the phase's
-            // eccentricity c^i; a <= b keeps the sum within the energy of
-            // single scattering's albedo-1 limit.
-            var octaves = 0.0;
-            var ai = 1.0;
-            var bi = 1.0;
-            var ci = 1.0;
-            for (var i = 0; i < 3; i++) {
-                octaves += bi * henyey_greenstein(cos_sun, 0.6 * ci) * exp(-ai * tau) * pow(far, ai);
-                ai *= a;
-                bi *= b;
-                ci *= c;
-            }
-            sun_light += absorbed * octaves;
-            ambient += absorbed * cov.a;
-            distance += absorbed * t;
-            transmittance *= exp(-extinction * dt);
-            if transmittance < 1e-3 {
-                break;
-            }
-        }
-        let opacity = 1.0 - transmittance;
-        sum += vec4<f32>(opacity, 0.0, sun_light, ambient);
-        weighted_distance += distance;
+        sum += march(id.xy, n, u32(params.frame.x) + s);
     }
-    var mean_distance = 0.0;
-    if sum.x > 0.0 {
-        mean_distance = weighted_distance / sum.x;
+    textureStore(gbuffer_out, id.xy, texel_of(sum, f32(samples)));
+}
+
+// The amortised G-buffer (the talk's "Implementation Detail"): the buffer
+// in 8 x 8 tiles, one march per texel spread over F frames, F dividing 64:
+// in frame f of a sample, each tile marches the 64 / F of its texels whose
+// rank r is in [(f mod F) 64 / F, (f mod F + 1) 64 / F), rank r being the
+// texel whose x and y interleave the bits of r reversed (x the even bits,
+// y the odd), so that each frame's texels form a regular lattice over the
+// tile (ranks 0 to 15: every other texel in both axes). Sums and counts
+// accumulate in `accum` (two vec4 a texel: the march sums, then the count)
+// until `resolve` turns them into a G-buffer.
+// params.tiles = (frame in the cycle, F, first sample number, clear flag).
+@group(0) @binding(11) var<storage, read_write> accum: array<vec4<f32>>;
+
+fn reverse6(r: u32) -> u32 {
+    return reverseBits(r) >> 26u;
+}
+
+@compute @workgroup_size(64)
+fn gbuffer_tiles(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = textureDimensions(gbuffer_out);
+    let frame = u32(params.tiles.x);
+    let per_sample = u32(params.tiles.y);
+    let slots = 64u / per_sample;
+    let tiles = (n + 7u) / 8u;
+    let tile = id.x / slots;
+    if tile >= tiles.x * tiles.y {
+        return;
     }
-    let g = sum / f32(samples);
-    textureStore(gbuffer_out, id.xy, vec4<f32>(g.x, mean_distance, g.z, g.w));
+    let rank = (frame % per_sample) * slots + id.x % slots;
+    let r = reverse6(rank);
+    let within = vec2<u32>((r & 1u) | ((r >> 1u) & 2u) | ((r >> 2u) & 4u), ((r >> 1u) & 1u) | ((r >> 2u) & 2u) | ((r >> 3u) & 4u));
+    let texel = vec2<u32>(tile % tiles.x, tile / tiles.x) * 8u + within;
+    if any(texel >= n) {
+        return;
+    }
+    let i = texel.y * n.x + texel.x;
+    accum[2u * i] += march(texel, n, u32(params.tiles.z) + frame / per_sample);
+    accum[2u * i + 1u].x += 1.0;
+}
+
+// The accumulated marches into the G-buffer (texels not yet marched: 0),
+// and the sums cleared for the next cycle when tiles.w is 1.
+@compute @workgroup_size(8, 8)
+fn resolve(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = textureDimensions(gbuffer_out);
+    if any(id.xy >= n) {
+        return;
+    }
+    let i = id.y * n.x + id.x;
+    let count = accum[2u * i + 1u].x;
+    var texel = vec4<f32>(0.0);
+    if count > 0.0 {
+        texel = texel_of(accum[2u * i], count);
+    }
+    textureStore(gbuffer_out, id.xy, texel);
+    if params.tiles.w > 0.5 {
+        accum[2u * i] = vec4<f32>(0.0);
+        accum[2u * i + 1u] = vec4<f32>(0.0);
+    }
 }

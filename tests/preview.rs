@@ -255,3 +255,55 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
     }
     eprintln!("{compared} landscape values compared; largest difference {worst:.2e} of the value");
 }
+
+/// Switching the amortised cloud G-buffer is blended: with the wind moving
+/// the clouds 3 km between G-buffers, the picture (a 64 x 64 fisheye of
+/// sky and clouds, lit from the bake) changes from frame to frame by at
+/// most 1.5 times the whole switch's change over the blend's 8 frames (a
+/// linear blend changes it by exactly one eighth a frame; the margin is
+/// for half-float rounding), where a switch without the blend would change
+/// it all at once; and the whole switch does change it (by more than 1 %
+/// of the mean luminance), so the bound is not met by clouds that stood
+/// still.
+#[test]
+fn a_cloud_gbuffer_switch_is_blended_over_frames() {
+    use sky::lut::decode::pixel_directions;
+    use sky::preview::cloud_coverage::default_coverage;
+    use sky::preview::clouds::{Amortisation, CloudSettings, Clouds};
+    use sky::preview::frame::Frame;
+    use sky::render::camera::Camera;
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let sky_pass = SkyPass::new(&gpu, luts).unwrap();
+    let mut clouds = Clouds::new(&gpu, &default_coverage(), 32, 1).unwrap();
+    let dirs = pixel_directions(&Camera::Fisheye, 64, 64);
+    let weather = Weather { sun_elevation_deg: 35.0, sun_azimuth_deg: 60.0, haziness: 0.2, cloudiness: 0.0, sun_disk: false };
+    let schedule = Amortisation { frames_per_sample: 2, blend_frames: 8 };
+    let mut pictures: Vec<Vec<f64>> = Vec::new();
+    let mut swaps = Vec::new();
+    for frame in 0..40u32 {
+        // 8 frames a G-buffer (4 marches a texel, each over 2 frames); the wind moves on at each cycle's start.
+        let settings = CloudSettings { cover: 0.5, samples: 4, steps: 24, wind_offset_km: [3.0 * f64::from(frame / 8), 0.0], ..CloudSettings::default() };
+        let report = clouds.step(&gpu, &weather, &settings, &schedule).unwrap();
+        if report.swapped {
+            swaps.push(frame);
+        }
+        let mut f = Frame::new(&gpu, &dirs).unwrap();
+        sky_pass.encode(&gpu, &mut f, luts, &weather).unwrap();
+        clouds.encode_lighting(&gpu, &mut f, luts, &weather).unwrap();
+        let rendered = f.finish().unwrap();
+        pictures.push(rendered.rgb.iter().map(|c| (c[0] + c[1] + c[2]) as f64).collect());
+    }
+    assert_eq!(swaps, vec![7, 15, 23, 31, 39]);
+    let change = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len() as f64;
+    // The switch at frame 23: the picture at 23 shows the previous G-buffer alone, at 31 the new one alone.
+    let whole = change(&pictures[23], &pictures[31]);
+    let mean = pictures[23].iter().sum::<f64>() / pictures[23].len() as f64;
+    assert!(whole > 0.01 * mean, "the clouds did not move: a change of {whole} on a mean of {mean}");
+    for frame in 24..=31 {
+        let step = change(&pictures[frame - 1], &pictures[frame]);
+        eprintln!("frame {frame}: changed by {:.3} % of the mean (the whole switch: {:.3} %)", 100.0 * step / mean, 100.0 * whole / mean);
+        assert!(step <= 1.5 * whole / 8.0, "frame {frame}: the picture changed by {step}, the whole switch by {whole}");
+    }
+}

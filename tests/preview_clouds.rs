@@ -86,16 +86,17 @@ fn the_noise_textures_tile_and_the_low_one_has_zero_mean() {
 /// more cover, more cloudy texels.
 #[test]
 fn the_cloud_gbuffer_keeps_its_invariants() {
-    use sky::preview::clouds::{default_coverage, CloudSettings, Clouds};
+    use sky::preview::cloud_coverage::default_coverage;
+    use sky::preview::clouds::{CloudSettings, Clouds};
     use sky::preview::sky_pass::Weather;
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
-    let clouds = Clouds::new(&gpu, &default_coverage(), 64, 1).unwrap();
+    let mut clouds = Clouds::new(&gpu, &default_coverage(), 64, 1).unwrap();
     for (e, az) in [(40.0, 10.0), (3.0, 250.0), (-4.0, 90.0)] {
         let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
         let mut cloudy_by_cover = Vec::new();
         for cover in [0.0, 0.3, 0.7] {
-            let settings = CloudSettings { cover, gbuffer_size: 64, samples: 1, steps: 32, ..CloudSettings::default() };
+            let settings = CloudSettings { cover, samples: 1, steps: 32, ..CloudSettings::default() };
             clouds.compute(&gpu, &weather, &settings, 0).unwrap();
             let g = clouds.read_gbuffer(&gpu).unwrap();
             assert_eq!(g.len(), 64 * 64);
@@ -125,39 +126,69 @@ fn the_cloud_gbuffer_keeps_its_invariants() {
     }
 }
 
-/// The G-buffer's Monte Carlo converges: the mean of N jittered marches
-/// per texel (N = 1, 4, 16) comes closer to a G-buffer of 64 independent
-/// marches as N grows, its RMS difference in opacity and sun in-scatter
-/// falling by at least a third with each fourfold N (1/sqrt(N) would halve
-/// it; the reference's own noise, 1/8 of one march's, keeps the last
-/// step from halving exactly). This is the convergence the amortised
-/// G-buffer relies on when it spreads the marches over frames (the
-/// amortisation itself is not built yet).
+/// The amortised G-buffer (48 x 48 texels, 6 x 6 tiles; a march of every
+/// texel spread over F = 4 frames; 16 marches a texel per G-buffer):
+/// - its work is spread evenly: after j frames every texel has been
+///   marched j / F times, rounded down or up, 16 texels of each tile more
+///   per frame, and after the first frame those 16 form the lattice of every
+///   other texel in both axes;
+/// - it converges: after 1, 4 and 16 marches a texel (4, 16 and 64
+///   frames) its estimate comes closer to a G-buffer of 64 marches made at
+///   once, the RMS difference of opacity and sun in-scatter falling by at
+///   least a quarter with each fourfold number of marches (1/sqrt would
+///   halve it; the reference's own noise and the sun in-scatter's rare
+///   bright marches, near the phase function's forward peak, keep it from
+///   halving exactly: measured 0.48 to 0.64; a G-buffer that did not
+///   converge would stay near 1);
+/// - after 64 frames it is finished and swapped in (and not before), and
+///   the current G-buffer is that estimate.
 #[test]
-fn the_cloud_gbuffer_converges_with_samples() {
-    use sky::preview::clouds::{default_coverage, CloudSettings, Clouds};
+fn the_amortised_gbuffer_spreads_its_work_and_converges() {
+    use sky::preview::cloud_coverage::default_coverage;
+    use sky::preview::clouds::{Amortisation, CloudSettings, Clouds};
     use sky::preview::sky_pass::Weather;
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
-    let clouds = Clouds::new(&gpu, &default_coverage(), 48, 1).unwrap();
+    let n = 48;
+    let mut clouds = Clouds::new(&gpu, &default_coverage(), n as u32, 1).unwrap();
     let weather = Weather { sun_elevation_deg: 30.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
-    let run = |samples: u32, first: u32| {
-        let settings = CloudSettings { cover: 0.5, gbuffer_size: 48, samples, steps: 32, ..CloudSettings::default() };
-        clouds.compute(&gpu, &weather, &settings, first).unwrap();
-        clouds.read_gbuffer(&gpu).unwrap()
-    };
-    let reference = run(64, 1_000_000);
+    let settings = CloudSettings { cover: 0.5, samples: 64, steps: 32, ..CloudSettings::default() };
+    clouds.compute(&gpu, &weather, &settings, 1_000_000).unwrap();
+    let reference = clouds.read_gbuffer(&gpu).unwrap();
     let rms = |g: &[[f32; 4]], c: usize| (g.iter().zip(&reference).map(|(a, b)| ((a[c] - b[c]) as f64).powi(2)).sum::<f64>() / g.len() as f64).sqrt();
+    let settings = CloudSettings { samples: 16, ..settings };
+    let schedule = Amortisation { frames_per_sample: 4, blend_frames: 8 };
     let mut previous: Option<[f64; 2]> = None;
-    for n in [1, 4, 16] {
-        let g = run(n, 0);
-        let now = [rms(&g, 0), rms(&g, 2)];
-        eprintln!("{n} marches a texel: RMS difference to 64, opacity {:.4}, sun in-scatter {:.5}", now[0], now[1]);
-        if let Some(p) = previous {
-            for c in 0..2 {
-                assert!(now[c] < 0.67 * p[c], "{n} marches: RMS difference {} against {} with a quarter of them", now[c], p[c]);
+    for frame in 1..=64u32 {
+        let report = clouds.step(&gpu, &weather, &settings, &schedule).unwrap();
+        assert_eq!(report.swapped, frame == 64, "frame {frame}: {report:?}");
+        if frame == 64 {
+            break;
+        }
+        let (estimate, counts) = clouds.read_progress(&gpu, &settings).unwrap();
+        let (low, high) = ((frame / 4) as f32, (frame / 4 + u32::from(frame % 4 != 0)) as f32);
+        assert!(counts.iter().all(|&c| c == low || c == high), "frame {frame}: marches per texel outside {low}..{high}");
+        assert_eq!(counts.iter().sum::<f32>(), (frame * 16 * 36) as f32, "frame {frame}: not 16 marches a tile a frame");
+        if frame == 1 {
+            for (i, &c) in counts.iter().enumerate() {
+                let (x, y) = (i % n, i / n);
+                assert_eq!(c == 1.0, x % 2 == 0 && y % 2 == 0, "frame 1: texel ({x}, {y}) marched {c} times");
             }
         }
-        previous = Some(now);
+        if [4, 16].contains(&frame) || frame == 63 {
+            let now = [rms(&estimate, 0), rms(&estimate, 2)];
+            eprintln!("frame {frame}: RMS difference to 64 marches at once, opacity {:.4}, sun in-scatter {:.5}", now[0], now[1]);
+            if frame != 63 {
+                if let Some(p) = previous {
+                    assert!(now[0] < 0.75 * p[0] && now[1] < 0.75 * p[1], "frame {frame}: {now:?} against {p:?}");
+                }
+                previous = Some(now);
+            }
+        }
     }
+    let done = clouds.read_gbuffer(&gpu).unwrap();
+    let last = [rms(&done, 0), rms(&done, 2)];
+    let p = previous.expect("measured at 16 frames");
+    eprintln!("swapped in: RMS difference opacity {:.4}, sun in-scatter {:.5}", last[0], last[1]);
+    assert!(last[0] < 0.75 * p[0] && last[1] < 0.75 * p[1], "the finished G-buffer {last:?} against 4 marches' {p:?}");
 }

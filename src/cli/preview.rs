@@ -80,7 +80,8 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use super::EXIT_INVALID;
     use anyhow::Context;
     use sky::lut::decode::{mat_mul, pixel_directions};
-    use sky::preview::clouds::{self, CloudSettings, Clouds};
+    use sky::preview::cloud_coverage;
+    use sky::preview::clouds::{CloudSettings, Clouds};
     use sky::preview::frame::Frame;
     use sky::preview::gpu::Gpu;
     use sky::preview::landscape::{Ground, LandscapePass};
@@ -130,23 +131,22 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     let clouds = match a.cumulus_cover > 0.0 {
         true => {
             let coverage = match &a.coverage {
-                Some(path) => match clouds::coverage_from_png(path) {
+                Some(path) => match cloud_coverage::coverage_from_png(path) {
                     Ok(c) => c,
                     Err(e) => {
                         eprintln!("sky preview: --coverage {e}");
                         return Ok(ExitCode::from(EXIT_INVALID));
                     }
                 },
-                None => clouds::default_coverage(),
+                None => cloud_coverage::default_coverage(),
             };
-            let settings =
-                CloudSettings { cover: a.cumulus_cover, wind_offset_km: [a.wind_offset_km.0, a.wind_offset_km.1], gbuffer_size: a.gbuffer_size, samples: a.cloud_samples, ..CloudSettings::default() };
-            let c = Clouds::new(&gpu, &coverage, a.gbuffer_size, settings.seed).context("preparing the clouds")?;
+            let settings = CloudSettings { cover: a.cumulus_cover, wind_offset_km: [a.wind_offset_km.0, a.wind_offset_km.1], samples: a.cloud_samples, ..CloudSettings::default() };
+            let mut c = Clouds::new(&gpu, &coverage, a.gbuffer_size, settings.seed).context("preparing the clouds")?;
             let seconds = c.compute(&gpu, &weather, &settings, 0).context("ray-marching the cloud G-buffer")?;
             if a.gbuffer {
                 write_gbuffer(&gpu, &c, &a.out.join("gbuffer.exr"))?;
                 if a.coverage.is_none() {
-                    clouds::write_coverage_png(&a.out.join("coverage.png"), &coverage)?;
+                    cloud_coverage::write_coverage_png(&a.out.join("coverage.png"), &coverage)?;
                 }
             }
             Some((c, seconds))
@@ -198,7 +198,7 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
 fn write_gbuffer(gpu: &sky::preview::gpu::Gpu, clouds: &sky::preview::clouds::Clouds, path: &std::path::Path) -> Result<()> {
     use anyhow::Context;
     let texels = clouds.read_gbuffer(gpu)?;
-    let n = clouds.gbuffer.width() as usize;
+    let n = clouds.gbuffer_size() as usize;
     let channels = exr::prelude::SpecificChannels::build().with_channel("opacity").with_channel("distance_km").with_channel("sun_inscatter").with_channel("ambient_inscatter").with_pixel_fn(
         |p: exr::math::Vec2<usize>| {
             let t = texels[p.y() * n + p.x()];

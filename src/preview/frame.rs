@@ -172,3 +172,17 @@ pub(crate) fn map(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, PreviewEr
     let data = slice.get_mapped_range().map_err(|e| PreviewError::Readback(e.to_string()))?;
     Ok(data.to_vec())
 }
+
+/// Copies `buffer` (with COPY_SRC) to a mappable one and reads its bytes.
+pub(crate) fn read_buffer(gpu: &Gpu, buffer: &wgpu::Buffer) -> Result<Vec<u8>, PreviewError> {
+    let back = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("readback"),
+        size: buffer.size(),
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("readback") });
+    encoder.copy_buffer_to_buffer(buffer, 0, &back, 0, buffer.size());
+    gpu.checked("readback", || gpu.queue.submit([encoder.finish()]))?;
+    map(gpu, &back)
+}

@@ -8,6 +8,7 @@
 //! (`lut::decode`) does and is tested against it by readback. Not yet: the
 //! global fog over a terrain, the clouds and their G-buffer, timelines.
 
+pub mod cloud_coverage;
 pub mod cloud_noise;
 pub mod clouds;
 pub mod frame;
