@@ -9,6 +9,8 @@
 //! - [`farm`]: the render farm (`sky worker` and the distributed `sky render`);
 //! - [`bake`]: `sky bake-luts`, the basis-sky LUTs rendered, cached and packed;
 //! - [`lut`]: the talk's adaptive LUT mappings, the weather rule and the reference decoder;
+//! - [`look`]: the sun at a time of day and preview timelines;
+//! - `preview` (feature `preview`): the LUTs, fog and clouds on a GPU through wgpu;
 //! - [`spectrum`]: colour matching functions and the solar spectrum;
 //! - [`session`]: prepared optics by hash, and views rendered with them;
 //! - [`lru`]: the memory-bounded cache that keeps prepared optics;
@@ -18,6 +20,7 @@
 pub mod atmosphere;
 pub mod bake;
 pub mod farm;
+pub mod look;
 pub mod lru;
 pub mod lut;
 pub mod mie;

@@ -23,14 +23,17 @@ fn root() -> PathBuf {
 /// A draft bake of `tests/bakes/preview.toml` (clear, hazed, cloudy0 and
 /// cloudy1), made once for the tests of this file.
 fn bake() -> &'static Luts {
+    &shared_bake().1
+}
+
+/// The shared bake's folder and LUTs.
+fn shared_bake() -> &'static (tempfile::TempDir, Luts) {
     static BAKE: OnceLock<(tempfile::TempDir, Luts)> = OnceLock::new();
-    &BAKE
-        .get_or_init(|| {
-            let dir = tempfile::tempdir().unwrap();
-            let luts = bake_into(&dir.path().join("luts"));
-            (dir, luts)
-        })
-        .1
+    BAKE.get_or_init(|| {
+        let dir = tempfile::tempdir().unwrap();
+        let luts = bake_into(&dir.path().join("luts"));
+        (dir, luts)
+    })
 }
 
 fn bake_into(out: &std::path::Path) -> Luts {
@@ -306,4 +309,68 @@ fn a_cloud_gbuffer_switch_is_blended_over_frames() {
         eprintln!("frame {frame}: changed by {:.3} % of the mean (the whole switch: {:.3} %)", 100.0 * step / mean, 100.0 * whole / mean);
         assert!(step <= 1.5 * whole / 8.0, "frame {frame}: the picture changed by {step}, the whole switch by {whole}");
     }
+}
+
+/// `sky preview --timeline`: a numbered picture (EXR and PNG) and G-buffer
+/// per frame, the states of the timeline in the JSON summary (the sun from
+/// the time, the wind's offset growing), per-pass GPU times where the
+/// adapter has timestamps; a bad timeline is an error naming its file and
+/// what is wrong (exit 1), before any GPU work.
+#[test]
+fn sky_preview_renders_a_timeline_frame_by_frame() {
+    shared_bake();
+    let manifest = shared_bake().0.path().join("luts/manifest.json");
+    let dir = tempfile::tempdir().unwrap();
+    let timeline = dir.path().join("day.toml");
+    std::fs::write(
+        &timeline,
+        "frames = 3\nlatitude_deg = 35.0\nday = 172\n[[key]]\nframe = 0\ntime = \"08:00\"\nhaziness = 0.0\ncloudiness = 0.0\ncumulus_cover = 0.5\nwind_km_h = [60.0, 0.0]\n[[key]]\nframe = 2\ntime = \"10:00\"\nhaziness = 0.4\ncloudiness = 0.1\ncumulus_cover = 0.5\nwind_km_h = [60.0, 0.0]\n",
+    )
+    .unwrap();
+    let out = dir.path().join("frames");
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let run = |timeline: &std::path::Path| {
+        Command::new(env!("CARGO_BIN_EXE_sky"))
+            .args([
+                "preview",
+                manifest.to_str().unwrap(),
+                "--timeline",
+                timeline.to_str().unwrap(),
+                "--size",
+                "32x32",
+                "--gbuffer-size",
+                "32",
+                "--cloud-samples",
+                "1",
+                "--frames-per-sample",
+                "1",
+                "--gbuffer",
+                "--json",
+                "--out",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap()
+    };
+    let o = run(&timeline);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let frames = summary["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 3);
+    for (k, f) in frames.iter().enumerate() {
+        for stem in ["sky", "gbuffer"] {
+            assert!(out.join(format!("{stem}.{k:04}.exr")).is_file(), "{stem} {k}");
+        }
+        assert!(out.join(format!("sky.{k:04}.png")).is_file());
+        let (e, a) = sky::look::solar::sun_position_deg(35.0, 172, 8.0 + k as f64);
+        assert!((f["state"]["sun_elevation_deg"].as_f64().unwrap() - e).abs() < 1e-9 && (f["state"]["sun_azimuth_deg"].as_f64().unwrap() - a).abs() < 1e-9);
+        assert!((f["state"]["wind_offset_km"][0].as_f64().unwrap() - 60.0 * k as f64).abs() < 1e-9, "{f}");
+    }
+    assert!(out.join("coverage.png").is_file());
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "frames = 3\n[[key]]\nframe = 0\nsun_elevation_deg = 100.0\nsun_azimuth_deg = 0.0\nhaziness = 0.0\ncloudiness = 0.0\n").unwrap();
+    let o = run(&bad);
+    assert_eq!(o.status.code(), Some(1));
+    let e = String::from_utf8_lossy(&o.stderr);
+    assert!(e.contains("bad.toml") && e.contains("key 1 (frame 0)") && e.contains("sun_elevation_deg"), "{e}");
 }

@@ -9,17 +9,43 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 #[derive(Args, Debug)]
+#[command(group(clap::ArgGroup::new("sun").required(true).args(["sun_elevation_deg", "time", "timeline"])))]
 pub struct PreviewArgs {
     /// The bake's manifest.json
     manifest: PathBuf,
-    #[command(flatten)]
-    conditions: Conditions,
+    /// Sun elevation above the horizon, degrees (-90 to 90)
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    sun_elevation_deg: Option<f64>,
+    /// Sun azimuth, degrees, from +x (east) toward +y (north)
+    #[arg(long, value_name = "DEG", default_value_t = 0.0, allow_negative_numbers = true, conflicts_with_all = ["time", "timeline"])]
+    sun_azimuth_deg: f64,
+    /// Local solar time HH:MM: the sun from --latitude-deg and --day instead of its angles
+    #[arg(long, value_name = "HH:MM", value_parser = sky::look::solar::parse_time)]
+    time: Option<f64>,
+    /// With --time: latitude, degrees north
+    #[arg(long, default_value_t = 35.0, allow_negative_numbers = true, requires = "time")]
+    latitude_deg: f64,
+    /// With --time: day of the year (1-366)
+    #[arg(long, default_value_t = 172, requires = "time")]
+    day: u32,
+    /// A timeline of time, weather, cumulus cover and wind (TOML; see the README): one picture per frame
+    #[arg(long, value_name = "FILE.toml", conflicts_with_all = ["frames", "haziness", "cloudiness", "cumulus_cover", "wind_offset_km"])]
+    timeline: Option<PathBuf>,
+    /// 0 = the clear basis sky, 1 = hazed
+    #[arg(long, default_value_t = 0.0)]
+    haziness: f64,
+    /// 0 = sunny; 1/6 = cloudy0, ..., 1 = cloudy5 (the manifest's weather rule)
+    #[arg(long, default_value_t = 0.0)]
+    cloudiness: f64,
+    /// Frames of the same state (the amortised cloud G-buffer goes on converging and swapping)
+    #[arg(long, default_value_t = 1)]
+    frames: usize,
     #[command(flatten)]
     view: ViewArgs,
     /// Image size WIDTHxHEIGHT
     #[arg(long, value_parser = super::render::parse_size, default_value = "512x512")]
     size: (usize, usize),
-    /// Output folder: sky.exr (CIE XYZ, Y in cd/m^2) and sky.png (tonemapped)
+    /// Output folder: sky.exr (CIE XYZ, Y in cd/m^2) and sky.png (tonemapped); sky.NNNN.exr and .png for several frames
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// PNG exposure, stops (0: the median luminance maps to a quarter of white, then Reinhard)
@@ -46,16 +72,19 @@ pub struct PreviewArgs {
     /// The cloud G-buffer's texels per side (the talk: 768 on PS4, 1024 on PS5)
     #[arg(long, default_value_t = 256)]
     gbuffer_size: u32,
-    /// Jittered ray marches averaged per G-buffer texel
+    /// Jittered ray marches per G-buffer texel (per G-buffer, when amortised over frames)
     #[arg(long, default_value_t = 4)]
     cloud_samples: u32,
+    /// Frames one march of every G-buffer texel is spread over (8x8 tiles; divides 64; the talk: 32 on PS5, 64 on PS4)
+    #[arg(long, default_value_t = 8)]
+    frames_per_sample: u32,
     /// The coverage texture, a 256x128 RGBA PNG painted with height upward (R height modulation, G low- and B mid-frequency noise weights, A ambient share); default: generated
     #[arg(long, value_name = "FILE.png")]
     coverage: Option<PathBuf>,
     /// Also write the cloud G-buffer (gbuffer.exr: opacity, distance km, sun and ambient in-scatter) and the generated coverage (coverage.png)
     #[arg(long)]
     gbuffer: bool,
-    /// Machine-readable summary on stdout (adapter, files, wall and per-pass GPU times)
+    /// Machine-readable summary on stdout (adapter, files, states, wall and per-pass GPU times per frame)
     #[arg(long)]
     json: bool,
 }
@@ -79,27 +108,66 @@ pub fn run(_a: PreviewArgs) -> Result<ExitCode> {
 pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use super::EXIT_INVALID;
     use anyhow::Context;
+    use sky::look::timeline::{self, FrameState};
     use sky::lut::decode::{mat_mul, pixel_directions};
     use sky::preview::cloud_coverage;
-    use sky::preview::clouds::{CloudSettings, Clouds};
-    use sky::preview::frame::Frame;
+    use sky::preview::clouds::Amortisation;
     use sky::preview::gpu::Gpu;
-    use sky::preview::landscape::{Ground, LandscapePass};
-    use sky::preview::sky_pass::{SkyPass, Weather};
+    use sky::preview::landscape::Ground;
+    use sky::preview::session::{CloudOptions, PreviewOptions, PreviewSession};
     use sky::render::{output, Image, PixelResult};
 
-    super::lut::check(&a.conditions)?;
+    let states: Vec<FrameState> = match &a.timeline {
+        Some(path) => match timeline::load(path) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("sky preview: --timeline {e}");
+                return Ok(ExitCode::from(EXIT_INVALID));
+            }
+        },
+        None => {
+            let (sun_elevation_deg, sun_azimuth_deg) = match (a.sun_elevation_deg, a.time) {
+                (Some(e), _) => (e, a.sun_azimuth_deg),
+                (None, Some(h)) => {
+                    if !(-90.0..=90.0).contains(&a.latitude_deg) || !(1..=366).contains(&a.day) {
+                        return super::usage("--latitude-deg must be from -90 to 90 and --day from 1 to 366");
+                    }
+                    sky::look::solar::sun_position_deg(a.latitude_deg, a.day, h)
+                }
+                (None, None) => return super::usage("give --sun-elevation-deg, --time or --timeline"),
+            };
+            let c = Conditions { sun_elevation_deg, sun_azimuth_deg, haziness: a.haziness, cloudiness: a.cloudiness };
+            super::lut::check(&c)?;
+            if !(0.0..=1.0).contains(&a.cumulus_cover) {
+                return super::usage(format!("--cumulus-cover must be from 0 to 1, got {}", a.cumulus_cover));
+            }
+            if a.frames == 0 {
+                return super::usage("--frames must be at least 1");
+            }
+            let state = FrameState {
+                frame: 0,
+                hours: a.time,
+                sun_elevation_deg,
+                sun_azimuth_deg,
+                haziness: a.haziness,
+                cloudiness: a.cloudiness,
+                cumulus_cover: a.cumulus_cover,
+                wind_offset_km: [a.wind_offset_km.0, a.wind_offset_km.1],
+            };
+            (0..a.frames).map(|frame| FrameState { frame, ..state.clone() }).collect()
+        }
+    };
     if !(0.0..=1.0).contains(&a.cloud_occlusion) {
         return super::usage(format!("--cloud-occlusion must be from 0 to 1, got {}", a.cloud_occlusion));
     }
-    if !(0.0..=1.0).contains(&a.cumulus_cover) {
-        return super::usage(format!("--cumulus-cover must be from 0 to 1, got {}", a.cumulus_cover));
+    if !(0.0..=1.0).contains(&a.albedo) {
+        return super::usage(format!("--albedo must be from 0 to 1, got {}", a.albedo));
     }
     if !(1..=4096).contains(&a.gbuffer_size) || !(1..=1024).contains(&a.cloud_samples) {
         return super::usage("--gbuffer-size must be from 1 to 4096 and --cloud-samples from 1 to 1024");
     }
-    if !(0.0..=1.0).contains(&a.albedo) {
-        return super::usage(format!("--albedo must be from 0 to 1, got {}", a.albedo));
+    if a.frames_per_sample == 0 || 64 % a.frames_per_sample != 0 {
+        return super::usage(format!("--frames-per-sample must divide 64 (1, 2, 4, 8, 16, 32 or 64), got {}", a.frames_per_sample));
     }
     let camera = a.view.camera()?;
     let (w, h) = a.size;
@@ -114,80 +182,89 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             return Ok(ExitCode::from(EXIT_INVALID));
         }
     };
-    let pass = SkyPass::new(&gpu, &luts).context("preparing the sky pass")?;
-    let landscape = match (a.no_landscape, luts.manifest.fog.is_some()) {
+    let ground = match (a.no_landscape, luts.manifest.fog.is_some()) {
         (true, _) => None,
-        (false, true) => Some(LandscapePass::new(&gpu, &luts).context("preparing the landscape")?),
+        (false, true) => Some(Ground { albedo: a.albedo, cloud_occlusion: a.cloud_occlusion }),
         (false, false) => {
             eprintln!("sky preview: {} has no fog LUTs (baked before them): the sky alone, without the landscape", a.manifest.display());
             None
         }
     };
-    let c = &a.conditions;
-    let dirs = pixel_directions(&camera, w, h);
-    let weather = Weather { sun_elevation_deg: c.sun_elevation_deg, sun_azimuth_deg: c.sun_azimuth_deg, haziness: c.haziness, cloudiness: c.cloudiness, sun_disk: !a.no_sun_disk };
-    let ground = Ground { albedo: a.albedo, cloud_occlusion: a.cloud_occlusion };
-    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
-    let clouds = match a.cumulus_cover > 0.0 {
-        true => {
-            let coverage = match &a.coverage {
-                Some(path) => match cloud_coverage::coverage_from_png(path) {
-                    Ok(c) => c,
-                    Err(e) => {
-                        eprintln!("sky preview: --coverage {e}");
-                        return Ok(ExitCode::from(EXIT_INVALID));
-                    }
-                },
-                None => cloud_coverage::default_coverage(),
-            };
-            let settings = CloudSettings { cover: a.cumulus_cover, wind_offset_km: [a.wind_offset_km.0, a.wind_offset_km.1], samples: a.cloud_samples, ..CloudSettings::default() };
-            let mut c = Clouds::new(&gpu, &coverage, a.gbuffer_size, settings.seed).context("preparing the clouds")?;
-            let seconds = c.compute(&gpu, &weather, &settings, 0).context("ray-marching the cloud G-buffer")?;
-            if a.gbuffer {
-                write_gbuffer(&gpu, &c, &a.out.join("gbuffer.exr"))?;
-                if a.coverage.is_none() {
-                    cloud_coverage::write_coverage_png(&a.out.join("coverage.png"), &coverage)?;
-                }
+    let any_clouds = states.iter().any(|s| s.cumulus_cover > 0.0);
+    let coverage = match (&a.coverage, any_clouds) {
+        (_, false) => None,
+        (Some(path), true) => match cloud_coverage::coverage_from_png(path) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                eprintln!("sky preview: --coverage {e}");
+                return Ok(ExitCode::from(EXIT_INVALID));
             }
-            Some((c, seconds))
-        }
-        false => None,
+        },
+        (None, true) => Some(cloud_coverage::default_coverage()),
     };
-    let mut frame = Frame::new(&gpu, &dirs)?;
-    pass.encode(&gpu, &mut frame, &luts, &weather).context("decoding the sky on the GPU")?;
-    if let Some((c, _)) = &clouds {
-        c.encode_lighting(&gpu, &mut frame, &luts, &weather).context("lighting the clouds")?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    if let (true, None, Some(c)) = (a.gbuffer, &a.coverage, &coverage) {
+        cloud_coverage::write_coverage_png(&a.out.join("coverage.png"), c)?;
     }
-    if let Some(l) = &landscape {
-        l.encode(&gpu, &mut frame, &luts, &weather, &ground).context("drawing the landscape on the GPU")?;
-    }
-    let decoded = frame.finish().context("rendering on the GPU")?;
+    let schedule = Amortisation { frames_per_sample: a.frames_per_sample, blend_frames: a.frames_per_sample * a.cloud_samples };
+    let clouds = coverage.map(|coverage| CloudOptions { coverage, gbuffer_size: a.gbuffer_size, samples: a.cloud_samples, schedule });
+    let options = PreviewOptions { sun_disk: !a.no_sun_disk, ground, clouds };
+    let mut session = PreviewSession::new(gpu, &luts, options).context("preparing the preview on the GPU")?;
+    let adapter = session.gpu.describe();
+    let dirs = pixel_directions(&camera, w, h);
     let m = luts.manifest.colour.xyz_from_rgb;
-    let pixels = decoded.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
-    let image = Image { width: w, height: h, pixels };
-    let (exr, png) = (a.out.join("sky.exr"), a.out.join("sky.png"));
-    let metadata = super::lut::decoded_metadata(format!("sky {} preview ({})", sky::VERSION, gpu.describe()), &a.manifest, c);
-    output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
-    output::write_png(&png, &image, a.exposure_ev, None).with_context(|| format!("writing {}", png.display()))?;
-    if a.json {
-        let summary = serde_json::json!({
-            "adapter": gpu.describe(),
-            "files": [exr, png],
-            "width": w,
-            "height": h,
-            "landscape": landscape.is_some(),
-            "cloud_gbuffer_seconds": clouds.as_ref().map(|c| c.1),
-            "wall_seconds": decoded.seconds,
-            "gpu_pass_seconds": decoded.passes.iter().map(|(name, s)| (name.to_string(), serde_json::json!(s))).collect::<serde_json::Map<_, _>>(),
-        });
-        outln!("{summary}");
-    } else {
-        let passes: Vec<String> = decoded.passes.iter().map(|(name, s)| format!("{name} {:.2} ms", 1e3 * s)).collect();
-        let passes = if passes.is_empty() { String::new() } else { format!(" (GPU: {})", passes.join(", ")) };
-        if let Some((_, s)) = &clouds {
-            eprintln!("sky preview: cloud G-buffer {0}x{0}, {1} marches a texel, in {s:.2} s", a.gbuffer_size, a.cloud_samples);
+    let numbered = states.len() > 1;
+    let name = |stem: &str, frame: usize, ext: &str| if numbered { a.out.join(format!("{stem}.{frame:04}.{ext}")) } else { a.out.join(format!("{stem}.{ext}")) };
+    let started = std::time::Instant::now();
+    let mut reports = Vec::new();
+    for (k, state) in states.iter().enumerate() {
+        let out = session.render(state, &dirs).with_context(|| format!("rendering frame {k} on the GPU"))?;
+        let pixels = out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
+        let image = Image { width: w, height: h, pixels };
+        let (exr, png) = (name("sky", k, "exr"), name("sky", k, "png"));
+        let c = Conditions { sun_elevation_deg: state.sun_elevation_deg, sun_azimuth_deg: state.sun_azimuth_deg, haziness: state.haziness, cloudiness: state.cloudiness };
+        let mut metadata = super::lut::decoded_metadata(format!("sky {} preview ({adapter})", sky::VERSION), &a.manifest, &c);
+        metadata.push(("cumulus_cover".into(), state.cumulus_cover.to_string()));
+        metadata.push(("frame".into(), k.to_string()));
+        output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
+        output::write_png(&png, &image, a.exposure_ev, None).with_context(|| format!("writing {}", png.display()))?;
+        let mut files = vec![exr, png];
+        if a.gbuffer {
+            if let Some(clouds) = session.clouds() {
+                let path = name("gbuffer", k, "exr");
+                write_gbuffer(&session.gpu, clouds, &path)?;
+                files.push(path);
+            }
         }
-        eprintln!("sky preview: {w}x{h} on {} in {:.1} ms{passes}, written to {} and {}", gpu.describe(), 1e3 * decoded.seconds, exr.display(), png.display());
+        let passes: serde_json::Map<String, serde_json::Value> = out.rendered.passes.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect();
+        if !a.json {
+            let gpu_ms: Vec<String> = out.rendered.passes.iter().map(|(n, s)| format!("{n} {:.2} ms", 1e3 * s)).collect();
+            let gpu_ms = if gpu_ms.is_empty() { String::new() } else { format!("; GPU: {}", gpu_ms.join(", ")) };
+            let clock = state.hours.map_or(String::new(), |h| format!(" {:02}:{:02},", h as u32, ((h.fract() * 60.0).round() as u32).min(59)));
+            let done = k + 1;
+            let eta = started.elapsed().as_secs_f64() / done as f64 * (states.len() - done) as f64;
+            let eta = if done < states.len() { format!(", ETA {eta:.0} s") } else { String::new() };
+            eprintln!(
+                "sky preview: frame {done}/{}{clock} sun {:.1} deg up, clouds {:.2} s, picture {:.1} ms{gpu_ms}{eta}: {}",
+                states.len(),
+                state.sun_elevation_deg,
+                out.cloud_seconds,
+                1e3 * out.rendered.seconds,
+                files[1].display()
+            );
+        }
+        reports.push(serde_json::json!({
+            "frame": k,
+            "state": state,
+            "files": files,
+            "wall_seconds": out.rendered.seconds,
+            "cloud_seconds": out.cloud_seconds,
+            "gbuffer_swapped": out.gbuffer_swapped,
+            "gpu_pass_seconds": passes,
+        }));
+    }
+    if a.json {
+        outln!("{}", serde_json::json!({ "adapter": adapter, "width": w, "height": h, "frames": reports }));
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -15,6 +15,7 @@ pub mod frame;
 pub mod gpu;
 pub mod landscape;
 pub mod plain_pass;
+pub mod session;
 pub mod sky_pass;
 
 /// What stops a preview.
