@@ -47,6 +47,7 @@ struct Params {
 @group(0) @binding(8) var shadow: texture_3d<f32>;
 @group(0) @binding(9) var clamped: sampler;
 @group(0) @binding(10) var repeating: sampler;
+@group(0) @binding(12) var occlusion_out: texture_storage_3d<rgba16float, write>;
 
 // The cumulus map's texel distribution: texel coordinate s in [-1, 1] to
 // world x = half * s * (K + (1 - K) |s|), texels 4 times denser at the
@@ -191,6 +192,37 @@ fn shadow_volume(@builtin(global_invocation_id) id: vec3<u32>) {
         transmittance = exp(-tau);
     }
     textureStore(shadow_out, id, vec4<f32>(transmittance, 0.0, 0.0, 1.0));
+}
+
+// The clouds' occlusion of the air below them, for the global fog (the
+// talk: "cloud occlusion is computed separately on the 3D grid that covers
+// the world"): each cell of a grid over the map (x, y) and altitudes from
+// the ground to the cloud base holds 1 - the transmittance toward the sun
+// through the coarse density, from the cell out of the layer (0 with the
+// sun below the horizon: no sunlight for clouds to take away).
+@compute @workgroup_size(4, 4, 4)
+fn occlusion_volume(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = textureDimensions(occlusion_out);
+    if any(id >= n) {
+        return;
+    }
+    let f = (vec3<f32>(id) + 0.5) / vec3<f32>(n);
+    let cell = vec3<f32>((2.0 * f.xy - 1.0) * params.planet.w, f.z * params.planet.y);
+    let sun = params.sun.xyz;
+    var occlusion = 0.0;
+    if sun.z > 0.0 {
+        let length_km = max(params.planet.z - cell.z, 0.0) / sun.z;
+        let start = max(params.planet.y - cell.z, 0.0) / sun.z;
+        var tau = 0.0;
+        let steps = 16;
+        let step = (length_km - start) / f32(steps);
+        for (var k = 0; k < steps; k++) {
+            let p = cell + sun * (start + (f32(k) + 0.5) * step);
+            tau += coverage_at(p).r * params.optics.x * step;
+        }
+        occlusion = 1.0 - exp(-tau);
+    }
+    textureStore(occlusion_out, id, vec4<f32>(occlusion, 0.0, 0.0, 1.0));
 }
 
 fn far_shadow(p: vec3<f32>) -> f32 {

@@ -15,6 +15,8 @@
 //   positive), times the talk's depth falloff
 //   (1 - e^(-k x)) / (1 - e^(-k)), k = a theta^p, x = depth / depth_max;
 // - attenuation: the Attenuation LUT at (x^(1/3), v).
+// The cloud occlusion is the caller's (header.w) or, with clouds, read
+// from their occlusion grid along the view (occlusion_along).
 // Elsewhere the picture (the sky pass's) is left as it is.
 
 // header = (cos, sin of the sun's azimuth; number of active skies; cloud
@@ -24,9 +26,13 @@
 //                slice 0, of slice 1) (2^-scale_log2),
 // sky[4k + 2] = (falloff a, falloff p, Attenuation layer, 0),
 // sky[4k + 3] = (planet radius km, observer altitude km, ceiling km, 0).
+// grid = (1: the cloud occlusion from the grid instead of header.w; the
+// grid's half span km (x and y); its top km (the cloud base); the planet's
+// radius km).
 struct Params {
     header: vec4<f32>,
     sky: array<vec4<f32>, 12>,
+    grid: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -40,6 +46,25 @@ struct Params {
 @group(0) @binding(8) var lit2: texture_2d_array<f32>;
 @group(0) @binding(9) var shadowed2: texture_2d_array<f32>;
 @group(0) @binding(10) var attenuation: texture_2d_array<f32>;
+@group(0) @binding(11) var occlusion_grid: texture_3d<f32>;
+@group(0) @binding(12) var clamped: sampler;
+
+// The clouds' occlusion of the air along the view to the surface: the
+// grid (clouds.wgsl `occlusion_volume`) averaged over 8 points spread
+// along the view to the surface's depth. Each point's altitude on the
+// sphere; points outside the grid read its edge.
+fn occlusion_along(d: vec3<f32>, depth_km: f32) -> f32 {
+    var sum = 0.0;
+    let r = params.grid.w;
+    for (var k = 0; k < 8; k++) {
+        let t = (f32(k) + 0.5) / 8.0 * depth_km;
+        let p = d * t;
+        let altitude = length(p + vec3<f32>(0.0, 0.0, r)) - r;
+        let f = vec3<f32>(p.xy / params.grid.y * 0.5 + 0.5, altitude / params.grid.z);
+        sum += textureSampleLevel(occlusion_grid, clamped, f, 0.0).r;
+    }
+    return clamp(sum / 8.0, 0.0, 1.0);
+}
 
 // Slot k's Fog (shadowed false) or Shadowed Fog (true) texel.
 fn fog_texel(k: u32, shadowed: bool, xy: vec2<i32>, layer: i32) -> vec3<f32> {
@@ -161,7 +186,10 @@ fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
     let uv = vec2<f32>(abs(atan2(sun_frame.y, sun_frame.x)) / 3.14159265358979, v);
     let sin_elevation = sin(radians(clamp(elevation_deg, 0.0, 90.0)));
     let theta = clamp(elevation_deg, 0.5, 90.0) / 90.0;
-    let occlusion = clamp(params.header.w, 0.0, 1.0);
+    var occlusion = clamp(params.header.w, 0.0, 1.0);
+    if params.grid.x > 0.5 {
+        occlusion = occlusion_along(d, depth_km);
+    }
     var inscatter = vec3<f32>(0.0);
     var transmitted = vec3<f32>(0.0);
     for (var k = 0u; k < u32(params.header.z); k++) {
@@ -186,5 +214,6 @@ fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
         inscatter += slices.x * fog_k;
         transmitted += slices.x * attenuation_k;
     }
-    radiance[i] = vec4<f32>(surface[i].rgb * transmitted + inscatter, 1.0);
+    // w: the cloud occlusion used, for inspection (elsewhere w is 1).
+    radiance[i] = vec4<f32>(surface[i].rgb * transmitted + inscatter, occlusion);
 }

@@ -218,7 +218,7 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
             let ground = Ground { albedo: 0.15, cloud_occlusion };
             let mut frame = Frame::new(&gpu, &dirs).unwrap();
             sky_pass.encode(&gpu, &mut frame, luts, &weather).unwrap();
-            landscape.encode(&gpu, &mut frame, luts, &weather, &ground).unwrap();
+            landscape.encode(&gpu, &mut frame, luts, &weather, &ground, None).unwrap();
             let rendered = frame.finish().unwrap();
             let cpu = landscape_toward(luts, &dirs, e, az, haziness, cloudiness, cloud_occlusion, 0.15).unwrap();
             let brightest = cpu.iter().flatten().fold(0.0f64, |a, &x| a.max(x));
@@ -373,4 +373,72 @@ fn sky_preview_renders_a_timeline_frame_by_frame() {
     assert_eq!(o.status.code(), Some(1));
     let e = String::from_utf8_lossy(&o.stderr);
     assert!(e.contains("bad.toml") && e.contains("key 1 (frame 0)") && e.contains("sun_elevation_deg"), "{e}");
+}
+
+/// The fog under clouds: with the clouds' occlusion grid bound, the fog
+/// pass shades each view by the grid averaged along it (the talk's "cloud
+/// occlusion computed separately on the 3D grid that covers the world"),
+/// and what it draws is the CPU decoder's landscape at that occlusion, to
+/// the first landscape test's tolerance. The occlusion lies in [0, 1], is 0
+/// everywhere without cover, grows with the cover, and varies across the
+/// view under broken cloud (the light shafts the talk shows).
+#[test]
+fn the_fog_under_clouds_takes_its_occlusion_from_the_grid() {
+    use sky::lut::landscape::{landscape_toward, ridge_depth_km, top_elevation_deg, RIDGES};
+    use sky::preview::cloud_coverage::default_coverage;
+    use sky::preview::clouds::{CloudSettings, Clouds, CUMULUS_SPAN_KM};
+    use sky::preview::frame::Frame;
+    use sky::preview::landscape::{Ground, LandscapePass, OcclusionGrid};
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let (sky_pass, landscape) = (SkyPass::new(&gpu, luts).unwrap(), LandscapePass::new(&gpu, luts).unwrap());
+    let mut clouds = Clouds::new(&gpu, &default_coverage(), 32, 1).unwrap();
+    let m = luts.manifest.colour.xyz_from_rgb;
+    let dirs: Vec<Option<DVec3>> = (0..=20).flat_map(|i| (0..60).map(move |j| Some(direction_deg(96.0 - 0.5 * i as f64, 6.0 * j as f64 + 0.7)))).collect();
+    let (e, az, haziness, cloudiness) = (50.0, 30.0, 0.3, 0.1);
+    let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness, cloudiness, sun_disk: false };
+    let mut means = Vec::new();
+    for cover in [0.0, 0.5, 0.9] {
+        let settings = CloudSettings { cover, samples: 1, steps: 16, ..CloudSettings::default() };
+        clouds.compute(&gpu, &weather, &settings, 0).unwrap();
+        let view = clouds.occlusion_grid();
+        let grid = OcclusionGrid { view: &view, half_span_km: 0.5 * CUMULUS_SPAN_KM, top_km: settings.base_km, planet_radius_km: settings.planet_radius_km };
+        let mut frame = Frame::new(&gpu, &dirs).unwrap();
+        sky_pass.encode(&gpu, &mut frame, luts, &weather).unwrap();
+        landscape.encode(&gpu, &mut frame, luts, &weather, &Ground { albedo: 0.15, cloud_occlusion: 0.0 }, Some(&grid)).unwrap();
+        let rendered = frame.finish().unwrap();
+        let mut occlusions = Vec::new();
+        for (i, d) in dirs.iter().enumerate() {
+            let d = d.unwrap();
+            let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
+            if ridge_depth_km(elevation, azimuth).is_none() || RIDGES.iter().any(|r| (elevation - top_elevation_deg(r, azimuth)).abs() < 1e-3) {
+                continue;
+            }
+            let occlusion = rendered.alpha[i];
+            assert!((0.0..=1.0).contains(&occlusion), "cover {cover}, direction {i}: occlusion {occlusion}");
+            occlusions.push(occlusion as f64);
+            let cpu = landscape_toward(luts, &[Some(d)], e, az, haziness, cloudiness, occlusion as f64, 0.15).unwrap()[0];
+            let g = sky::lut::decode::mat_mul(&m, rendered.rgb[i].map(f64::from));
+            for c in 0..3 {
+                assert!(
+                    (g[c] - cpu[c]).abs() <= 1e-3 * cpu[c].abs() + 1e-6 * cpu[1].abs().max(1e-9),
+                    "cover {cover}, direction {i} (occlusion {occlusion}), channel {c}: GPU {} against CPU {}",
+                    g[c],
+                    cpu[c]
+                );
+            }
+        }
+        let mean = occlusions.iter().sum::<f64>() / occlusions.len() as f64;
+        let (low, high) = occlusions.iter().fold((1.0f64, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+        eprintln!("cover {cover}: {} terrain views, occlusion mean {mean:.3}, from {low:.3} to {high:.3}", occlusions.len());
+        if cover == 0.0 {
+            assert_eq!(high, 0.0, "occlusion without clouds");
+        }
+        if cover == 0.5 {
+            assert!(high - low > 0.1, "broken cloud shades every view alike: {low} to {high}");
+        }
+        means.push(mean);
+    }
+    assert!(means.windows(2).all(|w| w[0] < w[1]), "occlusion by cover 0, 0.5, 0.9: {means:?}");
 }

@@ -70,7 +70,7 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
         plain.encode(&gpu, &mut frame)?;
         sky.encode(&gpu, &mut frame, &luts, &weather)?;
         if let Some(l) = &landscape {
-            l.encode(&gpu, &mut frame, &luts, &weather, &ground)?;
+            l.encode(&gpu, &mut frame, &luts, &weather, &ground, None)?;
         }
         times.push(frame.finish()?.passes);
     }

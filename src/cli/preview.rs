@@ -57,7 +57,7 @@ pub struct PreviewArgs {
     /// Leave out the landscape: ridges of mountains at 2 to 100 km, lit by the decoded sun and sky and seen through the global fog (drawn by default where the bake has fog LUTs)
     #[arg(long)]
     no_landscape: bool,
-    /// How much clouds shade the air in front of the landscape, 0 (the Fog LUT) to 1 (the Shadowed Fog LUT)
+    /// Without clouds (--cumulus-cover 0): how much clouds shade the air in front of the landscape, 0 (the Fog LUT) to 1 (the Shadowed Fog LUT); with clouds their occlusion grid decides
     #[arg(long, default_value_t = 0.0)]
     cloud_occlusion: f64,
     /// The ridges' albedo

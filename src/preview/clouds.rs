@@ -31,6 +31,9 @@ pub const CUMULUS_SPAN_KM: f64 = 240.0;
 /// The distant-cloud shadow volume's cells: x, y over the map, z from
 /// the ground to the cloud top.
 const SHADOW_CELLS: [u32; 3] = [64, 64, 16];
+/// The cloud-occlusion grid of the fog's air: x, y over the map, z from
+/// the ground to the cloud base.
+pub const OCCLUSION_CELLS: [u32; 3] = [64, 64, 4];
 /// The G-buffer's tiles (the talk: "one tile corresponds to one wavefront").
 pub const TILE: u32 = 8;
 
@@ -82,6 +85,7 @@ pub struct Clouds {
     coverage: wgpu::TextureView,
     cumulus: wgpu::Texture,
     shadow: wgpu::Texture,
+    occlusion: wgpu::Texture,
     /// The G-buffers: displayed previous, displayed current, being computed.
     buffers: [wgpu::Texture; 3],
     /// The amortised marches' sums and counts, two vec4 a texel.
@@ -101,6 +105,7 @@ pub struct Clouds {
 enum Pass {
     Cumulus,
     Shadow,
+    Occlusion,
     Whole,
     Tiles,
     Resolve,
@@ -109,6 +114,7 @@ enum Pass {
 struct Pipelines {
     cumulus: wgpu::ComputePipeline,
     shadow: wgpu::ComputePipeline,
+    occlusion: wgpu::ComputePipeline,
     gbuffer: wgpu::ComputePipeline,
     tiles: wgpu::ComputePipeline,
     resolve: wgpu::ComputePipeline,
@@ -189,6 +195,7 @@ impl Clouds {
         let d2 = wgpu::TextureDimension::D2;
         let cumulus = storage_texture(gpu, "cumulus map", [CUMULUS_SIZE, CUMULUS_SIZE, 1], d2)?;
         let shadow = storage_texture(gpu, "distant-cloud shadow", SHADOW_CELLS, wgpu::TextureDimension::D3)?;
+        let occlusion = storage_texture(gpu, "cloud occlusion", OCCLUSION_CELLS, wgpu::TextureDimension::D3)?;
         let g = [gbuffer_size, gbuffer_size, 1];
         let buffers = [storage_texture(gpu, "cloud G-buffer", g, d2)?, storage_texture(gpu, "cloud G-buffer", g, d2)?, storage_texture(gpu, "cloud G-buffer", g, d2)?];
         let texels = u64::from(gbuffer_size) * u64::from(gbuffer_size);
@@ -232,13 +239,15 @@ impl Clouds {
         let pipelines = Pipelines {
             cumulus: gpu.compute_pipeline_auto("cumulus map", &module, "cumulus_map")?,
             shadow: gpu.compute_pipeline_auto("distant-cloud shadow", &module, "shadow_volume")?,
+            occlusion: gpu.compute_pipeline_auto("cloud occlusion", &module, "occlusion_volume")?,
             gbuffer: gpu.compute_pipeline_auto("cloud G-buffer", &module, "gbuffer")?,
             tiles: gpu.compute_pipeline_auto("cloud G-buffer tiles", &module, "gbuffer_tiles")?,
             resolve: gpu.compute_pipeline_auto("cloud G-buffer resolve", &module, "resolve")?,
             light_layout,
             light,
         };
-        let clouds = Clouds { noise, coverage: coverage.create_view(&Default::default()), cumulus, shadow, buffers, accum, clamped, repeating, pipelines, frame_in_cycle: 0, cycles: 0, blend: 1.0 };
+        let clouds =
+            Clouds { noise, coverage: coverage.create_view(&Default::default()), cumulus, shadow, occlusion, buffers, accum, clamped, repeating, pipelines, frame_in_cycle: 0, cycles: 0, blend: 1.0 };
         clouds.clear_sums(gpu)?;
         Ok(clouds)
     }
@@ -261,11 +270,13 @@ impl Clouds {
     fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, pass: Pass, uniform: &wgpu::Buffer, target: Option<&wgpu::Texture>, groups: [u32; 3]) -> Result<(), PreviewError> {
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
         let (cumulus, shadow, low, high) = (view(&self.cumulus), view(&self.shadow), view(&self.noise.low), view(&self.noise.high));
+        let occlusion = view(&self.occlusion);
         let target = target.map(view);
         use wgpu::BindingResource::{Sampler, TextureView};
         let (pipeline, wants): (&wgpu::ComputePipeline, &[u32]) = match pass {
             Pass::Cumulus => (&self.pipelines.cumulus, &[0, 1]),
             Pass::Shadow => (&self.pipelines.shadow, &[0, 2, 4, 5, 9]),
+            Pass::Occlusion => (&self.pipelines.occlusion, &[0, 4, 5, 9, 12]),
             Pass::Whole => (&self.pipelines.gbuffer, &[0, 3, 4, 5, 6, 7, 8, 9, 10]),
             Pass::Tiles => (&self.pipelines.tiles, &[0, 3, 4, 5, 6, 7, 8, 9, 10, 11]),
             Pass::Resolve => (&self.pipelines.resolve, &[0, 3, 11]),
@@ -281,6 +292,7 @@ impl Clouds {
                 7 => TextureView(&high),
                 9 => Sampler(&self.clamped),
                 10 => Sampler(&self.repeating),
+                12 => TextureView(&occlusion),
                 _ => self.accum.as_entire_binding(),
             })
         };
@@ -298,10 +310,19 @@ impl Clouds {
         gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("cloud params"), contents: &f32_bytes(values), usage: wgpu::BufferUsages::UNIFORM })
     }
 
-    /// Records the cumulus map and the shadow volume for `weather`.
+    /// Records the cumulus map, the shadow volume and the occlusion grid
+    /// for `weather`.
     fn record_environment(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, uniform: &wgpu::Buffer) -> Result<(), PreviewError> {
         self.record(gpu, encoder, Pass::Cumulus, uniform, None, [CUMULUS_SIZE / 8, CUMULUS_SIZE / 8, 1])?;
-        self.record(gpu, encoder, Pass::Shadow, uniform, None, SHADOW_CELLS.map(|n| n / 4))
+        self.record(gpu, encoder, Pass::Shadow, uniform, None, SHADOW_CELLS.map(|n| n / 4))?;
+        self.record(gpu, encoder, Pass::Occlusion, uniform, None, OCCLUSION_CELLS.map(|n| n.div_ceil(4)))
+    }
+
+    /// The cloud-occlusion grid of the air below the clouds (R: 1 - the
+    /// transmittance toward the sun), for the global fog: x, y over the
+    /// cumulus map's 240 km, z from the ground to the cloud base.
+    pub fn occlusion_grid(&self) -> wgpu::TextureView {
+        self.occlusion.create_view(&Default::default())
     }
 
     fn submit(gpu: &Gpu, encoder: wgpu::CommandEncoder) -> Result<(), PreviewError> {

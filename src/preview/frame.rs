@@ -44,6 +44,9 @@ pub struct Frame<'g> {
 pub struct Rendered {
     /// Linear RGB per direction (0 outside the view).
     pub rgb: Vec<[f32; 3]>,
+    /// The picture's fourth channel: on the terrain the cloud occlusion the
+    /// fog pass used, elsewhere 1 (0 outside the view).
+    pub alpha: Vec<f32>,
     /// The surface buffer: the terrain's lit RGB and depth (km; 0: none).
     pub surface: Vec<[f32; 4]>,
     /// Wall time from the first upload to the readback, seconds.
@@ -146,7 +149,9 @@ impl<'g> Frame<'g> {
         let seconds = self.start.elapsed().as_secs_f64();
         let floats =
             |b: &[u8]| b.chunks_exact(16).take(self.count).map(|c| std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))).collect::<Vec<[f32; 4]>>();
-        let rgb = floats(&rgb_bytes).into_iter().map(|v| [v[0], v[1], v[2]]).collect();
+        let picture = floats(&rgb_bytes);
+        let rgb = picture.iter().map(|v| [v[0], v[1], v[2]]).collect();
+        let alpha = picture.iter().map(|v| v[3]).collect();
         let surface = floats(&surface_bytes);
         let mut passes = Vec::new();
         if let Some(back) = times_back {
@@ -156,7 +161,7 @@ impl<'g> Frame<'g> {
                 passes.push((*name, ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_s));
             }
         }
-        Ok(Rendered { rgb, surface, seconds, passes })
+        Ok(Rendered { rgb, alpha, surface, seconds, passes })
     }
 }
 

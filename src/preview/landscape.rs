@@ -34,6 +34,15 @@ pub struct Ground {
     pub cloud_occlusion: f64,
 }
 
+/// The clouds' occlusion grid (`Clouds::occlusion_grid`) and where it lies.
+pub struct OcclusionGrid<'a> {
+    pub view: &'a wgpu::TextureView,
+    /// Half its horizontal span (x and y), and its top, km.
+    pub half_span_km: f64,
+    pub top_km: f64,
+    pub planet_radius_km: f64,
+}
+
 /// A basis sky's fog arrays on the GPU.
 struct SkyFog {
     lit: wgpu::TextureView,
@@ -45,6 +54,9 @@ pub struct LandscapePass {
     /// Per manifest sky (None: no fog for it).
     fog: Vec<Option<SkyFog>>,
     attenuation: wgpu::TextureView,
+    /// Bound where there is no occlusion grid (never read then).
+    no_grid: wgpu::TextureView,
+    clamped: wgpu::Sampler,
     terrain_layout: wgpu::BindGroupLayout,
     terrain: wgpu::ComputePipeline,
     fog_layout: wgpu::BindGroupLayout,
@@ -97,16 +109,42 @@ impl LandscapePass {
         let (terrain_layout, terrain) = gpu.compute_pipeline("terrain", super::shaders::TERRAIN, "terrain", &[buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, write)])?;
         let mut entries = vec![buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, read), buffer_entry(3, write)];
         entries.extend((4..=10).map(array_entry));
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 11,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: true }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
+            count: None,
+        });
+        entries.push(wgpu::BindGroupLayoutEntry { binding: 12, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering), count: None });
+        let no_grid = gpu.checked("empty occlusion grid", || {
+            gpu.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("no occlusion grid"),
+                size: wgpu::Extent3d { width: 1, height: 1, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: wgpu::TextureFormat::Rgba16Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            })
+        })?;
+        let no_grid = no_grid.create_view(&Default::default());
+        let clamped = gpu.device.create_sampler(&wgpu::SamplerDescriptor { label: Some("clamped"), mag_filter: wgpu::FilterMode::Linear, min_filter: wgpu::FilterMode::Linear, ..Default::default() });
         let (fog_layout, fog_pipeline) = gpu.compute_pipeline("fog", super::shaders::FOG, "fog", &entries)?;
-        Ok(LandscapePass { fog, attenuation, terrain_layout, terrain, fog_layout, fog_pipeline })
+        Ok(LandscapePass { fog, attenuation, no_grid, clamped, terrain_layout, terrain, fog_layout, fog_pipeline })
     }
 
     /// Records the terrain and fog passes into `frame`, after the sky pass:
     /// where a view meets a ridge, the picture becomes the lit ridge seen
-    /// through the fog.
-    pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather, ground: &Ground) -> Result<(), PreviewError> {
+    /// through the fog, shaded by the clouds' `grid` where there is one
+    /// (else by `ground.cloud_occlusion`).
+    pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather, ground: &Ground, grid: Option<&OcclusionGrid>) -> Result<(), PreviewError> {
         let terrain_params = terrain_params(luts, weather, ground)?;
-        let (fog_params, active) = fog_params(luts, weather, ground);
+        let (mut fog_params, active) = fog_params(luts, weather, ground);
+        fog_params.extend(match grid {
+            Some(g) => [1.0, g.half_span_km as f32, g.top_km as f32, g.planet_radius_km as f32],
+            None => [0.0, 1.0, 1.0, 6371.0],
+        });
         let (terrain_bind, fog_bind) = gpu.checked("landscape bind groups", || {
             let uniform = frame.uniform("terrain params", &terrain_params);
             let terrain_bind = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -138,6 +176,8 @@ impl LandscapePass {
                     wgpu::BindGroupEntry { binding: 8, resource: view(&slot(2).lit) },
                     wgpu::BindGroupEntry { binding: 9, resource: view(&slot(2).shadowed) },
                     wgpu::BindGroupEntry { binding: 10, resource: view(&self.attenuation) },
+                    wgpu::BindGroupEntry { binding: 11, resource: view(grid.map_or(&self.no_grid, |g| g.view)) },
+                    wgpu::BindGroupEntry { binding: 12, resource: wgpu::BindingResource::Sampler(&self.clamped) },
                 ],
             });
             (terrain_bind, fog_bind)

@@ -7,10 +7,10 @@
 //! at once for the first frame, then amortised over the frames as the
 //! talk's), the terrain and the global fog.
 
-use super::clouds::{Amortisation, CloudSettings, Clouds};
+use super::clouds::{Amortisation, CloudSettings, Clouds, CUMULUS_SPAN_KM};
 use super::frame::{Frame, Rendered};
 use super::gpu::Gpu;
-use super::landscape::{Ground, LandscapePass};
+use super::landscape::{Ground, LandscapePass, OcclusionGrid};
 use super::sky_pass::{SkyPass, Weather};
 use super::PreviewError;
 use crate::look::timeline::FrameState;
@@ -100,7 +100,10 @@ impl<'l> PreviewSession<'l> {
             clouds.encode_lighting(&self.gpu, &mut frame, self.luts, &weather)?;
         }
         if let (Some(landscape), Some(ground)) = (&self.landscape, &self.options.ground) {
-            landscape.encode(&self.gpu, &mut frame, self.luts, &weather, ground)?;
+            let view = self.clouds.as_ref().map(|c| c.occlusion_grid());
+            let defaults = CloudSettings::default();
+            let grid = view.as_ref().map(|view| OcclusionGrid { view, half_span_km: 0.5 * CUMULUS_SPAN_KM, top_km: defaults.base_km, planet_radius_km: defaults.planet_radius_km });
+            landscape.encode(&self.gpu, &mut frame, self.luts, &weather, ground, grid.as_ref())?;
         }
         let rendered = frame.finish()?;
         self.frames += 1;
