@@ -10,7 +10,7 @@ space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd lavapipe demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
+.PHONY: all build test ktx-parse openjd lavapipe golden-update demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
 
 all: build
 
@@ -36,6 +36,11 @@ build:
 test: build ktx-parse openjd lavapipe
 	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(CARGO) test --release --locked --features fault-injection,preview
 	$(CARGO) build --release --locked --features preview
+
+# The GPU preview's golden pictures (tests/golden/, see its README) drawn
+# again by the current build: only for a change meant to alter them.
+golden-update: build lavapipe
+	SKY_GOLDEN_UPDATE=1 WGPU_BACKEND=vulkan NODEVICE_SELECT=1 cargo test --release --locked --features preview --test preview the_preview_draws_its_golden_scenes
 
 # Mesa's lavapipe from Debian when the machine has no Vulkan driver for it
 # (CI runs as root on a fresh machine); otherwise say what is missing.
