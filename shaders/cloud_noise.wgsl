@@ -10,10 +10,10 @@
 //   about 300 m), in [0, 1].
 // The middle frequency is the low texture read at a smaller scale.
 //
-// Every value is a function of the integer lattice and a seed only (an
-// integer hash, pcg3d of Jarzynski and Olano 2020, "Hash Functions for GPU
-// Rendering", JCGT 9(3)), so the textures are the same on every adapter
-// up to its float arithmetic.
+// Every value is a function of the integer lattice and a seed only (the
+// integer hash `pcg3d` of hash.wgsl, which the preview puts before this
+// file), so the textures are the same on every adapter up to its float
+// arithmetic.
 
 struct Params {
     // Texels per side; seed.
@@ -28,18 +28,6 @@ struct Params {
 @group(0) @binding(1) var<storage, read_write> values: array<f32>;
 @group(0) @binding(2) var<storage, read_write> partial: array<f32>;
 @group(0) @binding(3) var noise: texture_storage_3d<rgba16float, write>;
-
-fn pcg3d(v_in: vec3<u32>) -> vec3<u32> {
-    var v = v_in * 1664525u + 1013904223u;
-    v.x += v.y * v.z;
-    v.y += v.z * v.x;
-    v.z += v.x * v.y;
-    v ^= v >> vec3<u32>(16u);
-    v.x += v.y * v.z;
-    v.y += v.z * v.x;
-    v.z += v.x * v.y;
-    return v;
-}
 
 // A point of the unit cube from lattice cell c (wrapped by `period`) and
 // the seed: three uniform numbers in [0, 1).

@@ -64,18 +64,6 @@ fn world_to_map(x: f32) -> f32 {
     return sign(x) * s;
 }
 
-fn pcg3d(v_in: vec3<u32>) -> vec3<u32> {
-    var v = v_in * 1664525u + 1013904223u;
-    v.x += v.y * v.z;
-    v.y += v.z * v.x;
-    v.z += v.x * v.y;
-    v ^= v >> vec3<u32>(16u);
-    v.x += v.y * v.z;
-    v.y += v.z * v.x;
-    v.z += v.x * v.y;
-    return v;
-}
-
 fn random2(c: vec2<i32>, salt: u32) -> vec2<f32> {
     return vec2<f32>(pcg3d(vec3<u32>(bitcast<vec2<u32>>(c), salt + u32(params.frame.y) * 131u)).xy >> vec2<u32>(8u)) / 16777216.0;
 }
@@ -162,11 +150,33 @@ fn density(p: vec3<f32>, c: vec4<f32>) -> f32 {
     return clamp(base - (1.0 - base) * 0.35 * high, 0.0, 1.0);
 }
 
-// The distant-cloud shadow: each cell of a grid over the map (x, y) and
-// altitudes from the ground to the top holds the transmittance toward the
-// sun from 4 km along the sun's direction (nearer, the G-buffer's own
-// march sees the clouds in detail) out of the layer, through the coarse
-// density (the cumulus map and the coverage's height modulation).
+// The coarse density's optical depth toward the sun from `cell`, between
+// `start_km` along the sun's direction and the top of the layer (16
+// midpoint steps through the cumulus map and the coverage's height
+// modulation); the sun above the horizon.
+fn coarse_depth_to_sun(cell: vec3<f32>, start_km: f32) -> f32 {
+    let sun = params.sun.xyz;
+    let length_km = max(params.planet.z - cell.z, 0.0) / sun.z;
+    let start = min(start_km, length_km);
+    let step = (length_km - start) / 16.0;
+    var tau = 0.0;
+    for (var k = 0; k < 16; k++) {
+        tau += coverage_at(cell + sun * (start + (f32(k) + 0.5) * step)).r * params.optics.x * step;
+    }
+    return tau;
+}
+
+// The centre of cell `id` of an `n` grid over the map (x, y) and altitudes
+// from the ground to `top_km`.
+fn grid_cell(id: vec3<u32>, n: vec3<u32>, top_km: f32) -> vec3<f32> {
+    let f = (vec3<f32>(id) + 0.5) / vec3<f32>(n);
+    return vec3<f32>((2.0 * f.xy - 1.0) * params.planet.w, f.z * top_km);
+}
+
+// The distant-cloud shadow: each cell of a grid from the ground to the
+// cloud top holds the transmittance toward the sun from 4 km along the
+// sun's direction (nearer, the G-buffer's own march sees the clouds in
+// detail) out of the layer, through the coarse density.
 const NEAR_SHADOW_KM: f32 = 4.0;
 
 @compute @workgroup_size(4, 4, 4)
@@ -175,52 +185,29 @@ fn shadow_volume(@builtin(global_invocation_id) id: vec3<u32>) {
     if any(id >= n) {
         return;
     }
-    let f = (vec3<f32>(id) + 0.5) / vec3<f32>(n);
-    let cell = vec3<f32>((2.0 * f.xy - 1.0) * params.planet.w, f.z * params.planet.z);
-    let sun = params.sun.xyz;
     var transmittance = 0.0;
-    if sun.z > 0.0 {
-        let length_km = max(params.planet.z - cell.z, 0.0) / sun.z;
-        var tau = 0.0;
-        let steps = 16;
-        let start = min(NEAR_SHADOW_KM, length_km);
-        let step = (length_km - start) / f32(steps);
-        for (var k = 0; k < steps; k++) {
-            let p = cell + sun * (start + (f32(k) + 0.5) * step);
-            tau += coverage_at(p).r * params.optics.x * step;
-        }
-        transmittance = exp(-tau);
+    if params.sun.z > 0.0 {
+        transmittance = exp(-coarse_depth_to_sun(grid_cell(id, n, params.planet.z), NEAR_SHADOW_KM));
     }
     textureStore(shadow_out, id, vec4<f32>(transmittance, 0.0, 0.0, 1.0));
 }
 
 // The clouds' occlusion of the air below them, for the global fog (the
 // talk: "cloud occlusion is computed separately on the 3D grid that covers
-// the world"): each cell of a grid over the map (x, y) and altitudes from
-// the ground to the cloud base holds 1 - the transmittance toward the sun
-// through the coarse density, from the cell out of the layer (0 with the
-// sun below the horizon: no sunlight for clouds to take away).
+// the world"): each cell of a grid from the ground to the cloud base holds
+// 1 - the transmittance toward the sun through the coarse density out of
+// the layer (0 with the sun below the horizon: no sunlight for clouds to
+// take away).
 @compute @workgroup_size(4, 4, 4)
 fn occlusion_volume(@builtin(global_invocation_id) id: vec3<u32>) {
     let n = textureDimensions(occlusion_out);
     if any(id >= n) {
         return;
     }
-    let f = (vec3<f32>(id) + 0.5) / vec3<f32>(n);
-    let cell = vec3<f32>((2.0 * f.xy - 1.0) * params.planet.w, f.z * params.planet.y);
-    let sun = params.sun.xyz;
     var occlusion = 0.0;
-    if sun.z > 0.0 {
-        let length_km = max(params.planet.z - cell.z, 0.0) / sun.z;
-        let start = max(params.planet.y - cell.z, 0.0) / sun.z;
-        var tau = 0.0;
-        let steps = 16;
-        let step = (length_km - start) / f32(steps);
-        for (var k = 0; k < steps; k++) {
-            let p = cell + sun * (start + (f32(k) + 0.5) * step);
-            tau += coverage_at(p).r * params.optics.x * step;
-        }
-        occlusion = 1.0 - exp(-tau);
+    if params.sun.z > 0.0 {
+        let cell = grid_cell(id, n, params.planet.y);
+        occlusion = 1.0 - exp(-coarse_depth_to_sun(cell, max(params.planet.y - cell.z, 0.0) / params.sun.z));
     }
     textureStore(occlusion_out, id, vec4<f32>(occlusion, 0.0, 0.0, 1.0));
 }

@@ -49,9 +49,9 @@ pub mod shaders {
     /// The benchmark's baseline, a plain textured pass (see `plain_pass`).
     pub const PLAIN_TEXTURE: &str = include_str!("../../shaders/plain_texture.wgsl");
     /// The clouds' noise textures (see `cloud_noise`).
-    pub const CLOUD_NOISE: &str = include_str!("../../shaders/cloud_noise.wgsl");
+    pub const CLOUD_NOISE: &str = concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/cloud_noise.wgsl"));
     /// The cumulus map, shadow volume and cloud G-buffer (see `clouds`).
-    pub const CLOUDS: &str = include_str!("../../shaders/clouds.wgsl");
+    pub const CLOUDS: &str = concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/clouds.wgsl"));
     /// The G-buffer's deferred lighting (see `clouds`).
     pub const CLOUD_LIGHTING: &str = include_str!("../../shaders/cloud_lighting.wgsl");
     /// Every shader, by file name.
