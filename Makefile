@@ -104,7 +104,7 @@ SUNSET_SPP ?= 256
 SUNSET_SPP_HAZED ?= 512
 # The README's contact sheet of the GPU preview: times of day (columns) x
 # weathers (rows: clear, hazy, cumulus, cloudy) at latitude 35 N on day 172,
-# looking south-west, decoded from bakes/look.toml with clouds and the
+# looking south-west 16 degrees up, decoded from bakes/look.toml with clouds and the
 # landscape's fog. About 5 minutes for the bake on 2 cores, then 1 to 2 s a picture.
 PREVIEW_TIMES := 06:00 09:00 12:00 17:00 19:00
 PREVIEW_WEATHERS := clear:0:0:0 hazy:0.6:0:0.15 cumulus:0.2:0:0.5 cloudy:0.3:0.3:0.75
@@ -115,7 +115,7 @@ preview-sheet: build lavapipe
 	  name=$${w%%:*}; rest=$${w#*:}; h=$${rest%%:*}; rest=$${rest#*:}; c=$${rest%%:*}; k=$${rest#*:}; \
 	  for t in $(PREVIEW_TIMES); do \
 	    WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(SKY) preview $(OUT)/look-luts/manifest.json --time $$t --latitude-deg 35 --day 172 \
-	      --haziness $$h --cloudiness $$c --cumulus-cover $$k --camera pinhole --look-azimuth-deg -135 --look-elevation-deg 8 --fov-deg 100 \
+	      --haziness $$h --cloudiness $$c --cumulus-cover $$k --camera pinhole --look-azimuth-deg -135 --look-elevation-deg 16 --fov-deg 100 \
 	      --size 240x135 --out $(OUT)/preview-sheet/$${name}_$${t%%:*} || exit 1; \
 	  done; \
 	done

@@ -3,10 +3,13 @@
 //! CPU), with the WGSL in `shaders/`. Behind the `preview` feature, so the
 //! library and `sky worker` do not pull wgpu.
 //!
-//! Built so far: the device ([`gpu`]) and the sky pass ([`sky_pass`]),
-//! which decodes the basis-sky arrays exactly as the CPU reference decoder
-//! (`lut::decode`) does and is tested against it by readback. Not yet: the
-//! global fog over a terrain, the clouds and their G-buffer, timelines.
+//! Built: the device ([`gpu`]), one frame's buffers and pass times
+//! ([`frame`]), the sky pass ([`sky_pass`], tested against the CPU
+//! decoder by readback), the landscape and its global fog
+//! ([`landscape`]), the clouds' noise ([`cloud_noise`]), coverage
+//! ([`cloud_coverage`]) and G-buffer with its amortisation and lighting
+//! ([`clouds`]), the benchmark's baseline ([`plain_pass`]) and the session
+//! that renders frames of a timeline ([`session`]).
 
 pub mod cloud_coverage;
 pub mod cloud_noise;
