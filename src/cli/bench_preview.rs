@@ -3,8 +3,7 @@
 //! full-screen pass in the same frames, reported as medians and a ratio;
 //! and the cloud G-buffer, at once and per amortised frame.
 
-use super::{usage, EXIT_INVALID};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -31,6 +30,8 @@ pub fn run(_a: BenchPreviewArgs) -> Result<ExitCode> {
 
 #[cfg(feature = "preview")]
 pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
+    use super::{usage, EXIT_INVALID};
+    use anyhow::Context;
     use sky::lut::decode::pixel_directions;
     use sky::preview::cloud_coverage::default_coverage;
     use sky::preview::clouds::{Amortisation, CloudSettings, Clouds};

@@ -2,7 +2,7 @@
 //! Mesa's lavapipe), written as linear XYZ OpenEXR and a tonemapped PNG.
 //! Without the `preview` feature the command says how to get it.
 
-use super::lut::{Conditions, ViewArgs};
+use super::lut::ViewArgs;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -106,6 +106,7 @@ pub fn run(_a: PreviewArgs) -> Result<ExitCode> {
 
 #[cfg(feature = "preview")]
 pub fn run(a: PreviewArgs) -> Result<ExitCode> {
+    use super::lut::Conditions;
     use super::EXIT_INVALID;
     use anyhow::Context;
     use sky::look::timeline::{self, FrameState};
