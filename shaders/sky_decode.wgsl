@@ -31,11 +31,15 @@ const KD: f32 = 0.50;
 // slice 1 likewise). The sun's disk (decode::Luts::decode_image's, from the
 // bake's sunlight): sun = (unit vector toward it, world frame; sine of its
 // angular radius), disk = (its radiance, linear RGB; 1 to draw it, 0 not).
+// point = (radiance, linear RGB; the bits of direction index + 1) of a sun
+// smaller than a pixel, put into the pixel nearest it (decode_image's
+// fallback, worked out on the CPU); w's bits 0: none.
 struct Params {
     header: vec4<f32>,
     sky: array<vec4<f32>, 6>,
     sun: vec4<f32>,
     disk: vec4<f32>,
+    point: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
@@ -186,6 +190,10 @@ fn decode(@builtin(global_invocation_id) id: vec3<u32>) {
     let toward = params.sun.xyz;
     if params.disk.w > 0.5 && dot(dir.xyz, toward) > 0.0 && length(cross(dir.xyz, toward)) <= params.sun.w {
         rgb += params.disk.rgb;
+    }
+    let point = bitcast<u32>(params.point.w);
+    if point != 0u && i == point - 1u {
+        rgb += params.point.rgb;
     }
     radiance[i] = vec4<f32>(rgb, 1.0);
 }

@@ -475,7 +475,7 @@ struct Golden {
 #[test]
 fn the_preview_draws_its_golden_scenes() {
     use sky::look::timeline::FrameState;
-    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::lut::decode::mat_mul;
     use sky::preview::cloud_coverage::default_coverage;
     use sky::preview::clouds::Amortisation;
     use sky::preview::landscape::Ground;
@@ -510,7 +510,7 @@ fn the_preview_draws_its_golden_scenes() {
         let clouds = scene.clouds.then(|| CloudOptions { coverage: default_coverage(), gbuffer_size: 64, samples: 2, schedule: Amortisation { frames_per_sample: 8, blend_frames: 16 } });
         let options = PreviewOptions { sun_disk: true, ground: Some(Ground { albedo: 0.15, cloud_occlusion: 0.0 }), clouds };
         let mut session = PreviewSession::new(gpu, luts, options).unwrap();
-        let out = session.render(&scene.state, &pixel_directions(&scene.camera, w, h)).unwrap();
+        let out = session.render(&scene.state, &scene.camera, w, h).unwrap();
         let m = luts.manifest.colour.xyz_from_rgb;
         let image = Image { width: w, height: h, pixels: out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect() };
         let drawn = scratch.path().join(format!("{}.png", scene.name));
@@ -541,4 +541,47 @@ fn the_preview_draws_its_golden_scenes() {
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A sun smaller than a pixel (a 32 x 32 fisheye: pixels of about 6
+/// degrees, the disk about half a degree): no pixel centre falls inside
+/// the disk, so, as the CPU decoder's `decode_image` does, the sun's
+/// irradiance goes into the pixel nearest it, over that pixel's solid
+/// angle; the GPU's picture is the CPU decoder's to the first test's
+/// tolerance everywhere, and that pixel outshines the sky around the sun
+/// by far (the sun is in the picture).
+#[test]
+fn the_gpu_puts_a_sun_smaller_than_a_pixel_where_the_cpu_decoder_does() {
+    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::preview::frame::Frame;
+    use sky::preview::sky_pass::sun_pixel;
+    use sky::render::camera::Camera;
+    let luts = bake();
+    let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
+    let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
+    let pass = SkyPass::new(&gpu, luts).unwrap();
+    let m = luts.manifest.colour.xyz_from_rgb;
+    let (w, h) = (32, 32);
+    let camera = Camera::Fisheye;
+    let dirs = pixel_directions(&camera, w, h);
+    for (e, az) in [(37.0, 20.0), (8.0, 200.0)] {
+        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.2, cloudiness: 0.0, sun_disk: true };
+        let point = sun_pixel(luts, &weather, &camera, w, h, &dirs).expect("a sun smaller than a pixel, within the image");
+        let mut frame = Frame::new(&gpu, &dirs).unwrap();
+        pass.encode_with_sun_pixel(&gpu, &mut frame, luts, &weather, Some(point)).unwrap();
+        let gpu_rgb = frame.finish().unwrap().rgb;
+        let cpu = luts.decode_image(&camera, w, h, e, az, 0.2, 0.0, true).unwrap();
+        let brightest = cpu.iter().flatten().fold(0.0f64, |a, &x| a.max(x));
+        for (i, d) in dirs.iter().enumerate() {
+            let Some(d) = d else { continue };
+            let g = mat_mul(&m, gpu_rgb[i].map(f64::from));
+            let spread = cpu_spread(luts, &weather, *d);
+            for k in 0..3 {
+                let allowed = 1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
+                assert!((g[k] - cpu[i][k]).abs() <= allowed, "sun {e} up at {az}, pixel {i}, channel {k}: GPU {} against CPU {}", g[k], cpu[i][k]);
+            }
+        }
+        let sky_near = luts.sample_xyz(e, az, 0.2, 0.0, dirs[point.0].unwrap())[1];
+        assert!(cpu[point.0][1] > 10.0 * sky_near, "sun {e}: the sun's pixel {} against the sky's {sky_near}", cpu[point.0][1]);
+    }
 }

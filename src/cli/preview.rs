@@ -48,9 +48,12 @@ pub struct PreviewArgs {
     /// Output folder: sky.exr (CIE XYZ, Y in cd/m^2) and sky.png (tonemapped); sky.NNNN.exr and .png for several frames
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
-    /// PNG exposure, stops (0: the median luminance maps to a quarter of white, then Reinhard)
+    /// PNG exposure, stops (0: the median luminance maps to a quarter of white, then Reinhard); with --ev100, stops over it
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     exposure_ev: f64,
+    /// PNG exposure fixed as a camera's EV100 (1.2 x 2^EV100 cd/m^2 maps to half of white after Reinhard; e.g. 15 for a sunny day, 9 at sunset) instead of each frame's own median: a sequence keeps the day's brightness changes
+    #[arg(long, allow_negative_numbers = true)]
+    ev100: Option<f64>,
     /// Leave out the sun's disk (drawn by default from the bake's sunlight where it covers pixel centres)
     #[arg(long)]
     no_sun_disk: bool,
@@ -110,7 +113,7 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     use super::EXIT_INVALID;
     use anyhow::Context;
     use sky::look::timeline::{self, FrameState};
-    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::lut::decode::mat_mul;
     use sky::preview::cloud_coverage;
     use sky::preview::clouds::Amortisation;
     use sky::preview::gpu::Gpu;
@@ -158,6 +161,9 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             (0..a.frames).map(|frame| FrameState { frame, ..state.clone() }).collect()
         }
     };
+    if !a.exposure_ev.is_finite() || a.ev100.is_some_and(|e| !(-20.0..=30.0).contains(&e)) {
+        return super::usage("--exposure-ev must be a number and --ev100 from -20 to 30");
+    }
     if !(0.0..=1.0).contains(&a.cloud_occlusion) {
         return super::usage(format!("--cloud-occlusion must be from 0 to 1, got {}", a.cloud_occlusion));
     }
@@ -212,14 +218,13 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     let options = PreviewOptions { sun_disk: !a.no_sun_disk, ground, clouds };
     let mut session = PreviewSession::new(gpu, &luts, options).context("preparing the preview on the GPU")?;
     let adapter = session.gpu.describe();
-    let dirs = pixel_directions(&camera, w, h);
     let m = luts.manifest.colour.xyz_from_rgb;
     let numbered = states.len() > 1;
     let name = |stem: &str, frame: usize, ext: &str| if numbered { a.out.join(format!("{stem}.{frame:04}.{ext}")) } else { a.out.join(format!("{stem}.{ext}")) };
     let started = std::time::Instant::now();
     let mut reports = Vec::new();
     for (k, state) in states.iter().enumerate() {
-        let out = session.render(state, &dirs).with_context(|| format!("rendering frame {k} on the GPU"))?;
+        let out = session.render(state, &camera, w, h).with_context(|| format!("rendering frame {k} on the GPU"))?;
         let pixels = out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
         let image = Image { width: w, height: h, pixels };
         let (exr, png) = (name("sky", k, "exr"), name("sky", k, "png"));
@@ -228,7 +233,11 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
         metadata.push(("cumulus_cover".into(), state.cumulus_cover.to_string()));
         metadata.push(("frame".into(), k.to_string()));
         output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
-        output::write_png(&png, &image, a.exposure_ev, None).with_context(|| format!("writing {}", png.display()))?;
+        match a.ev100 {
+            Some(ev) => output::write_png_scaled(&png, &image, 2f64.powf(a.exposure_ev) / output::saturation_luminance(ev), None),
+            None => output::write_png(&png, &image, a.exposure_ev, None),
+        }
+        .with_context(|| format!("writing {}", png.display()))?;
         let mut files = vec![exr, png];
         if a.gbuffer {
             if let Some(clouds) = session.clouds() {

@@ -359,24 +359,30 @@ impl Luts {
             }
         }
         if !covered {
-            // The pixel whose centre is nearest the sun, and its solid angle
-            // from the directions through its corners.
-            let nearest = dirs.iter().enumerate().filter_map(|(i, d)| d.map(|d| (i, d.dot(s)))).max_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((i, _)) = nearest {
-                let (x, y) = ((i % width) as f64, (i / width) as f64);
-                let corner = |dx: f64, dy: f64| camera.direction(x + dx, y + dy, width, height);
-                if let (Some(a), Some(b), Some(c)) = (corner(0.0, 0.0), corner(1.0, 0.0), corner(0.0, 1.0)) {
-                    let omega = (b - a).cross(c - a).length();
-                    let half = 0.5 * (b - a).length().max((c - a).length());
-                    // Only when the sun is within the pixel, not off the image's edge.
-                    if omega > 0.0 && dirs[i].is_some_and(|d| libm::acos(d.dot(s).min(1.0)) <= half * std::f64::consts::SQRT_2) {
-                        let e = to_xyz(sun.irradiance_rgb);
-                        xyz[i] = std::array::from_fn(|k| xyz[i][k] + e[k] / omega);
-                    }
-                }
+            if let Some((i, rgb)) = self.sub_pixel_sun(camera, width, height, &dirs, s, sun.irradiance_rgb) {
+                let e = to_xyz(rgb);
+                xyz[i] = std::array::from_fn(|k| xyz[i][k] + e[k]);
             }
         }
         Some(xyz)
+    }
+
+    /// A sun too small to cover any pixel centre (`dirs`, the pixels of
+    /// `camera` at `width` x `height`; `toward` the unit vector to the sun):
+    /// the pixel whose centre is nearest the sun and the radiance that puts
+    /// the sun's irradiance `irradiance_rgb` into it (irradiance over the
+    /// pixel's solid angle, from the directions through its corners); None
+    /// when the sun lies off the image rather than within that pixel.
+    pub fn sub_pixel_sun(&self, camera: &crate::render::camera::Camera, width: usize, height: usize, dirs: &[Option<DVec3>], toward: DVec3, irradiance_rgb: [f64; 3]) -> Option<(usize, [f64; 3])> {
+        let (i, _) = dirs.iter().enumerate().filter_map(|(i, d)| d.map(|d| (i, d.dot(toward)))).max_by(|a, b| a.1.total_cmp(&b.1))?;
+        let (x, y) = ((i % width) as f64, (i / width) as f64);
+        let corner = |dx: f64, dy: f64| camera.direction(x + dx, y + dy, width, height);
+        let (a, b, c) = (corner(0.0, 0.0)?, corner(1.0, 0.0)?, corner(0.0, 1.0)?);
+        let omega = (b - a).cross(c - a).length();
+        let half = 0.5 * (b - a).length().max((c - a).length());
+        // Only when the sun is within the pixel, not off the image's edge.
+        let within = dirs[i].is_some_and(|d| libm::acos(d.dot(toward).min(1.0)) <= half * std::f64::consts::SQRT_2);
+        (omega > 0.0 && within).then(|| (i, irradiance_rgb.map(|e| e / omega)))
     }
 
     /// The sun at each basis sky's observer for a sun at

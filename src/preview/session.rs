@@ -11,10 +11,11 @@ use super::clouds::{Amortisation, CloudSettings, Clouds, CUMULUS_SPAN_KM};
 use super::frame::{Frame, Rendered};
 use super::gpu::Gpu;
 use super::landscape::{Ground, LandscapePass, OcclusionGrid};
-use super::sky_pass::{SkyPass, Weather};
+use super::sky_pass::{sun_pixel, SkyPass, Weather};
 use super::PreviewError;
 use crate::look::timeline::FrameState;
-use crate::lut::decode::Luts;
+use crate::lut::decode::{pixel_directions, Luts};
+use crate::render::camera::Camera;
 use glam::DVec3;
 
 /// How the clouds are made.
@@ -57,6 +58,8 @@ pub struct PreviewSession<'l> {
     landscape: Option<LandscapePass>,
     clouds: Option<Clouds>,
     frames: usize,
+    /// The last view and its pixels' directions.
+    view: Option<((Camera, usize, usize), Vec<Option<DVec3>>)>,
 }
 
 impl<'l> PreviewSession<'l> {
@@ -71,7 +74,7 @@ impl<'l> PreviewSession<'l> {
             Some(c) => Some(Clouds::new(&gpu, &c.coverage, c.gbuffer_size, CloudSettings::default().seed)?),
             None => None,
         };
-        Ok(PreviewSession { gpu, luts, options, sky, landscape, clouds, frames: 0 })
+        Ok(PreviewSession { gpu, luts, options, sky, landscape, clouds, frames: 0, view: None })
     }
 
     /// The clouds, for reading their G-buffer.
@@ -79,8 +82,13 @@ impl<'l> PreviewSession<'l> {
         self.clouds.as_ref()
     }
 
-    /// The next frame, for `state`, toward `dirs`.
-    pub fn render(&mut self, state: &FrameState, dirs: &[Option<DVec3>]) -> Result<FrameOutput, PreviewError> {
+    /// The next frame, for `state`, through `camera` at `width` x `height`.
+    pub fn render(&mut self, state: &FrameState, camera: &Camera, width: usize, height: usize) -> Result<FrameOutput, PreviewError> {
+        let key = (camera.clone(), width, height);
+        if self.view.as_ref().is_none_or(|v| v.0 != key) {
+            self.view = Some((key, pixel_directions(camera, width, height)));
+        }
+        let dirs = &self.view.as_ref().expect("just set").1;
         let weather =
             Weather { sun_elevation_deg: state.sun_elevation_deg, sun_azimuth_deg: state.sun_azimuth_deg, haziness: state.haziness, cloudiness: state.cloudiness, sun_disk: self.options.sun_disk };
         let (mut cloud_seconds, mut gbuffer_swapped) = (0.0, false);
@@ -95,7 +103,8 @@ impl<'l> PreviewSession<'l> {
             }
         }
         let mut frame = Frame::new(&self.gpu, dirs)?;
-        self.sky.encode(&self.gpu, &mut frame, self.luts, &weather)?;
+        let sun_pixel = sun_pixel(self.luts, &weather, camera, width, height, dirs);
+        self.sky.encode_with_sun_pixel(&self.gpu, &mut frame, self.luts, &weather, sun_pixel)?;
         if let Some(clouds) = &self.clouds {
             clouds.encode_lighting(&self.gpu, &mut frame, self.luts, &weather)?;
         }

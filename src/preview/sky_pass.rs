@@ -74,7 +74,19 @@ impl SkyPass {
     /// Records the sky pass into `frame`: linear RGB toward each direction
     /// under `weather` into the frame's radiance buffer.
     pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather) -> Result<(), PreviewError> {
-        let (params, active) = frame_params(luts, weather)?;
+        self.encode_with_sun_pixel(gpu, frame, luts, weather, None)
+    }
+
+    /// [`SkyPass::encode`] with a sun smaller than a pixel put into one
+    /// (`sun_pixel`: the direction's index and the radiance to add, from
+    /// [`sun_pixel`]).
+    pub fn encode_with_sun_pixel(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather, sun_pixel: Option<(usize, [f64; 3])>) -> Result<(), PreviewError> {
+        let (mut params, active) = frame_params(luts, weather)?;
+        match sun_pixel {
+            // The index travels as the bits of an f32 (the shader bitcasts it back), plus one: 0 is none.
+            Some((i, rgb)) if weather.sun_disk && i < u32::MAX as usize => params.extend(rgb.map(|x| x as f32).into_iter().chain([f32::from_bits(i as u32 + 1)])),
+            _ => params.extend([0.0; 4]),
+        }
         let bind = gpu.checked("sky decode bind group", || {
             let uniform = frame.uniform("sky params", &params);
             // Unused texture slots hold any array: their weight is 0 and the shader never reads them.
@@ -104,6 +116,24 @@ impl SkyPass {
         self.encode(gpu, &mut frame, luts, weather)?;
         frame.finish()
     }
+}
+
+/// Where a sun smaller than a pixel goes for `camera` at `width` x
+/// `height` (directions `dirs`): none if the disk covers a pixel centre
+/// (the shader draws it there) or lies off the image; else the pixel
+/// nearest it and the radiance that puts the sun's irradiance into it, as
+/// the CPU decoder's `decode_image` does (`Luts::sub_pixel_sun`).
+pub fn sun_pixel(luts: &Luts, weather: &Weather, camera: &crate::render::camera::Camera, width: usize, height: usize, dirs: &[Option<DVec3>]) -> Option<(usize, [f64; 3])> {
+    if !weather.sun_disk {
+        return None;
+    }
+    let sun = luts.sun(weather.sun_elevation_deg, weather.haziness, weather.cloudiness)?;
+    let toward = crate::render::camera::direction_deg(90.0 - weather.sun_elevation_deg, weather.sun_azimuth_deg);
+    let cos_radius = libm::cos(0.5 * sun.angular_diameter_deg.to_radians());
+    if dirs.iter().flatten().any(|d| d.dot(toward) >= cos_radius) {
+        return None;
+    }
+    luts.sub_pixel_sun(camera, width, height, dirs, toward, sun.irradiance_rgb)
 }
 
 /// The shader's `Params` for `weather` (see `sky_decode.wgsl`) and the

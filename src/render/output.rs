@@ -72,7 +72,21 @@ pub fn write_png(path: &Path, img: &Image, exposure_ev: f64, white_xyz: Option<[
     let mut lum: Vec<f64> = img.pixels.iter().map(|p| p.xyz[1]).filter(|y| *y > 0.0 && y.is_finite()).collect();
     lum.sort_by(f64::total_cmp);
     let median = lum.get(lum.len() / 2).copied().unwrap_or(1.0);
-    let scale = 0.25 / median * 2f64.powf(exposure_ev);
+    write_png_scaled(path, img, 0.25 / median * 2f64.powf(exposure_ev), white_xyz)
+}
+
+/// The luminance (cd/m²) that a camera exposed at `ev100` saturates at:
+/// L_max = 1.2 · 2^EV100 (the saturation-based sensitivity of ISO 12232
+/// with S = 100, K = 12.5 and lens attenuation q = 0.65; Lagarde and de
+/// Rousiers 2014, "Moving Frostbite to Physically Based Rendering", eq. 12).
+pub fn saturation_luminance(ev100: f64) -> f64 {
+    1.2 * 2f64.powf(ev100)
+}
+
+/// [`write_png`] with a fixed exposure: linear sRGB times `scale`, then
+/// Reinhard and the sRGB transfer (a sequence at one exposure keeps the
+/// brightness changes between its frames).
+pub fn write_png_scaled(path: &Path, img: &Image, scale: f64, white_xyz: Option<[f64; 3]>) -> std::io::Result<()> {
     let balance = match white_xyz {
         Some(wh) => {
             let rgb = xyz_to_linear_srgb(wh);
@@ -93,4 +107,32 @@ pub fn write_png(path: &Path, img: &Image, exposure_ev: f64, white_xyz: Option<[
     let mut png = Vec::new();
     im.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map_err(|e| std::io::Error::other(e.to_string()))?;
     crate::mie::cache::write_atomic(path, &png)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::PixelResult;
+
+    /// A fixed exposure maps the saturation luminance of its EV100 to half
+    /// of white before the sRGB transfer (Reinhard: 1 / (1 + 1)), whatever
+    /// the rest of the image, and a luminance four times lower to 1/5.
+    #[test]
+    fn a_fixed_exposure_puts_the_saturation_luminance_at_half_of_white() {
+        // D65 white (x, y = 0.3127, 0.3290) of luminance y: linear sRGB (y, y, y) to 4 digits.
+        let grey = |y: f64| PixelResult::from_xyz([0.3127 / 0.3290 * y, y, (1.0 - 0.3127 - 0.3290) / 0.3290 * y]);
+        let ev100 = 13.0;
+        let l = saturation_luminance(ev100);
+        assert!((l - 9830.4).abs() < 1e-9, "{l}");
+        let image = Image { width: 3, height: 1, pixels: vec![grey(l), grey(l / 4.0), grey(1e6)] };
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fixed.png");
+        write_png_scaled(&path, &image, 1.0 / l, None).unwrap();
+        let png = image::open(&path).unwrap().to_rgb8();
+        let code = |v: f64| (srgb_oetf(v) * 255.0 + 0.5) as u8;
+        for c in 0..3 {
+            assert!(png.get_pixel(0, 0)[c].abs_diff(code(0.5)) <= 1, "{:?}", png.get_pixel(0, 0));
+            assert!(png.get_pixel(1, 0)[c].abs_diff(code(0.2)) <= 1, "{:?}", png.get_pixel(1, 0));
+        }
+    }
 }
