@@ -10,7 +10,7 @@ space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd lavapipe golden-update preview-sheet demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
+.PHONY: all build test ktx-parse openjd lavapipe cxx golden-update preview-sheet demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
 
 all: build
 
@@ -33,7 +33,7 @@ build:
 # on the CPU; `make lavapipe`) through Vulkan only: on wgpu's GL fallback
 # formats go missing and arrays read back as zeros, so a missing driver
 # must fail, not fall back.
-test: build ktx-parse openjd lavapipe
+test: build ktx-parse openjd lavapipe cxx
 	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(CARGO) test --release --locked --features fault-injection,preview
 	$(CARGO) build --release --locked --features preview
 
@@ -41,6 +41,11 @@ test: build ktx-parse openjd lavapipe
 # again by the current build: only for a change meant to alter them.
 golden-update: build lavapipe
 	SKY_GOLDEN_UPDATE=1 WGPU_BACKEND=vulkan NODEVICE_SELECT=1 cargo test --release --locked --features preview --test preview the_preview_draws_its_golden_scenes
+
+# A C++ compiler for the tests' FLIP (the nv-flip crate builds NVIDIA's
+# C++ reference), from Debian as root where the machine has none.
+cxx:
+	@command -v c++ >/dev/null 2>&1 || { if [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then apt-get update -qq && apt-get install -y -qq g++; else echo "make test needs a C++ compiler (e.g. apt-get install g++)" >&2; exit 1; fi; }
 
 # Mesa's lavapipe from Debian when the machine has no Vulkan driver for it
 # (CI runs as root on a fresh machine); otherwise say what is missing.
