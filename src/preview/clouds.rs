@@ -18,7 +18,7 @@
 use super::cloud_coverage::{COVERAGE_HEIGHT, COVERAGE_WIDTH};
 use super::cloud_noise::CloudNoise;
 use super::frame::Frame;
-use super::gpu::{buffer_entry, f32_bytes, Gpu};
+use super::gpu::{buffer_entry, Gpu};
 use super::sky_pass::Weather;
 use super::PreviewError;
 use crate::lut::decode::Luts;
@@ -306,10 +306,6 @@ impl Clouds {
         Ok(())
     }
 
-    fn uniform(gpu: &Gpu, values: &[f32]) -> wgpu::Buffer {
-        gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("cloud params"), contents: &f32_bytes(values), usage: wgpu::BufferUsages::UNIFORM })
-    }
-
     /// Records the cumulus map, the shadow volume and the occlusion grid
     /// for `weather`.
     fn record_environment(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, uniform: &wgpu::Buffer) -> Result<(), PreviewError> {
@@ -338,7 +334,7 @@ impl Clouds {
     pub fn compute(&mut self, gpu: &Gpu, weather: &Weather, settings: &CloudSettings, first_sample: u32) -> Result<f64, PreviewError> {
         let start = std::time::Instant::now();
         let n = self.gbuffer_size();
-        let uniform = Self::uniform(gpu, &params(settings, weather, n, first_sample, [0.0; 4]));
+        let uniform = gpu.uniform("cloud params", &params(settings, weather, n, first_sample, [0.0; 4]));
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clouds") });
         self.record_environment(gpu, &mut encoder, &uniform)?;
         self.record(gpu, &mut encoder, Pass::Whole, &uniform, Some(&self.buffers[1]), [n.div_ceil(8), n.div_ceil(8), 1])?;
@@ -363,7 +359,7 @@ impl Clouds {
         let samples = settings.samples.max(1);
         let first = self.cycles.wrapping_mul(samples);
         let tiles = [f64::from(self.frame_in_cycle), f64::from(per_sample), f64::from(first), 1.0];
-        let uniform = Self::uniform(gpu, &params(settings, weather, n, first, tiles));
+        let uniform = gpu.uniform("cloud params", &params(settings, weather, n, first, tiles));
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("amortised clouds") });
         if self.frame_in_cycle == 0 {
             self.record_environment(gpu, &mut encoder, &uniform)?;
@@ -392,7 +388,7 @@ impl Clouds {
     pub fn read_progress(&self, gpu: &Gpu, settings: &CloudSettings) -> Result<(Vec<[f32; 4]>, Vec<f32>), PreviewError> {
         let n = self.gbuffer_size();
         let scratch = storage_texture(gpu, "G-buffer progress", [n, n, 1], wgpu::TextureDimension::D2)?;
-        let uniform = Self::uniform(gpu, &params(settings, &Weather { sun_elevation_deg: 0.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false }, n, 0, [0.0; 4]));
+        let uniform = gpu.uniform("cloud params", &params(settings, &Weather { sun_elevation_deg: 0.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false }, n, 0, [0.0; 4]));
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("G-buffer progress") });
         self.record(gpu, &mut encoder, Pass::Resolve, &uniform, Some(&scratch), [n.div_ceil(8), n.div_ceil(8), 1])?;
         let texels = gpu.read_rgba16f(encoder, &scratch)?;

@@ -107,7 +107,7 @@ impl<'g> Frame<'g> {
 
     /// A uniform buffer holding `values`.
     pub fn uniform(&self, label: &'static str, values: &[f32]) -> wgpu::Buffer {
-        self.gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(values), usage: wgpu::BufferUsages::UNIFORM })
+        self.gpu.uniform(label, values)
     }
 
     /// Submits the frame, waits for it and reads back the picture, the

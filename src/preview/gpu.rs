@@ -102,6 +102,12 @@ impl Gpu {
         })
     }
 
+    /// A uniform buffer holding `values`.
+    pub fn uniform(&self, label: &'static str, values: &[f32]) -> wgpu::Buffer {
+        use wgpu::util::DeviceExt;
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(values), usage: wgpu::BufferUsages::UNIFORM })
+    }
+
     /// The shader module of WGSL `source`.
     pub fn module(&self, label: &'static str, source: &str) -> Result<wgpu::ShaderModule, PreviewError> {
         self.checked(label, || self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) }))

@@ -17,12 +17,12 @@
 
 use super::frame::Frame;
 use super::gpu::{array_entry, buffer_entry, Gpu};
-use super::sky_pass::{Weather, ACTIVE_SKIES};
+use super::sky_pass::{active_skies, Weather, ACTIVE_SKIES};
 use super::PreviewError;
 use crate::lut::decode::{slice_pair, Luts};
 use crate::lut::landscape::RIDGES;
+use crate::lut::manifest::FogSkyEntry;
 use crate::lut::rgba16f;
-use crate::lut::weather::{basis_weights, BASIS};
 
 /// What the landscape shows besides the weather.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -212,19 +212,9 @@ fn terrain_params(luts: &Luts, weather: &Weather, ground: &Ground) -> Result<Vec
 /// over the skies with fog, each sky's slice pair and its slices' scales.
 fn fog_params(luts: &Luts, weather: &Weather, ground: &Ground) -> (Vec<f32>, Vec<usize>) {
     let entry = luts.manifest.fog.as_ref().expect("LandscapePass::new checked the fog");
-    let w = basis_weights(weather.haziness, weather.cloudiness);
-    let mut active = Vec::new();
-    for (k, name) in BASIS.iter().enumerate() {
-        if w[k] == 0.0 {
-            continue;
-        }
-        let Some(i) = luts.manifest.skies.iter().position(|s| s.name == *name) else { continue };
-        let Some(f) = entry.skies.iter().find(|f| f.name == *name) else { continue };
-        active.push((i, f, w[k]));
-    }
-    let present: f64 = active.iter().map(|a| a.2).sum();
-    let scale = if present > 0.0 && present < 1.0 { 1.0 / present } else { 1.0 };
-    active.truncate(ACTIVE_SKIES);
+    let fog_of = |name: &str| entry.skies.iter().find(|f| f.name == name);
+    let active: Vec<(usize, &FogSkyEntry, f64)> =
+        active_skies(luts, weather, |name| fog_of(name).is_some()).into_iter().filter_map(|(i, w)| fog_of(&luts.manifest.skies[i].name).map(|f| (i, f, w))).collect();
     let azimuth = weather.sun_azimuth_deg.to_radians();
     let mut p = vec![libm::cos(azimuth) as f32, libm::sin(azimuth) as f32, active.len() as f32, ground.cloud_occlusion as f32];
     for k in 0..ACTIVE_SKIES {
@@ -232,7 +222,7 @@ fn fog_params(luts: &Luts, weather: &Weather, ground: &Ground) -> (Vec<f32>, Vec
             Some(&(i, f, weight)) => {
                 let (i0, i1, t) = slice_pair(&luts.manifest.skies[i], 90.0 - weather.sun_elevation_deg);
                 let s = |log2: i32| (-log2 as f64).exp2() as f32;
-                p.extend([(weight * scale) as f32, t as f32, i0 as f32, i1 as f32]);
+                p.extend([weight as f32, t as f32, i0 as f32, i1 as f32]);
                 p.extend([s(f.fog_scale_log2[i0]), s(f.fog_scale_log2[i1]), s(f.shadowed_scale_log2[i0]), s(f.shadowed_scale_log2[i1])]);
                 p.extend([f.falloff_a as f32, f.falloff_p as f32, f.attenuation_layer as f32, 0.0]);
                 p.extend([f.planet_radius_km as f32, f.observer_altitude_km as f32, entry.ceiling_km as f32, 0.0]);

@@ -136,6 +136,20 @@ pub fn sun_pixel(luts: &Luts, weather: &Weather, camera: &crate::render::camera:
     luts.sub_pixel_sun(camera, width, height, dirs, toward, sun.irradiance_rgb)
 }
 
+/// The basis skies that `weather` gives weight, in the weather rule's
+/// order, as (manifest index, weight): those of the bake for which
+/// `usable(name)` holds, their weights renormalised over them where the
+/// bake lacks some of the rule's skies (as the CPU decoder does); at most
+/// [`ACTIVE_SKIES`].
+pub(crate) fn active_skies(luts: &Luts, weather: &Weather, usable: impl Fn(&str) -> bool) -> Vec<(usize, f64)> {
+    let w = basis_weights(weather.haziness, weather.cloudiness);
+    let present: Vec<(usize, f64)> =
+        BASIS.iter().enumerate().filter(|&(k, name)| w[k] > 0.0 && usable(name)).filter_map(|(k, name)| luts.manifest.skies.iter().position(|s| s.name == *name).map(|i| (i, w[k]))).collect();
+    let total: f64 = present.iter().map(|p| p.1).sum();
+    let scale = if total > 0.0 && total < 1.0 { 1.0 / total } else { 1.0 };
+    present.into_iter().take(ACTIVE_SKIES).map(|(i, w)| (i, w * scale)).collect()
+}
+
 /// The shader's `Params` for `weather` (see `sky_decode.wgsl`) and the
 /// manifest indices of the active skies, in slot order: the weather rule's
 /// weights renormalised over the skies the bake has (as [`Luts::sample`]
@@ -144,11 +158,7 @@ pub fn sun_pixel(luts: &Luts, weather: &Weather, camera: &crate::render::camera:
 /// bake without a sun.
 pub fn frame_params(luts: &Luts, weather: &Weather) -> Result<(Vec<f32>, Vec<usize>), PreviewError> {
     let sun_zenith_deg = 90.0 - weather.sun_elevation_deg;
-    let w = basis_weights(weather.haziness, weather.cloudiness);
-    let present: Vec<(usize, f64)> = BASIS.iter().enumerate().filter_map(|(k, name)| luts.manifest.skies.iter().position(|s| s.name == *name).map(|i| (i, w[k]))).collect();
-    let total: f64 = present.iter().map(|p| p.1).sum();
-    let scale = if total > 0.0 && total < 1.0 { 1.0 / total } else { 1.0 };
-    let active: Vec<(usize, f64)> = present.into_iter().filter(|p| p.1 > 0.0).take(ACTIVE_SKIES).collect();
+    let active = active_skies(luts, weather, |_| true);
     let azimuth = weather.sun_azimuth_deg.to_radians();
     let mut params = vec![sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG).to_radians() as f32, libm::cos(azimuth) as f32, libm::sin(azimuth) as f32, active.len() as f32];
     for k in 0..ACTIVE_SKIES {
@@ -158,7 +168,7 @@ pub fn frame_params(luts: &Luts, weather: &Weather) -> Result<(Vec<f32>, Vec<usi
                 let (i0, i1, f) = slice_pair(entry, sun_zenith_deg);
                 let slice_scale = |s: usize| (-entry.slices[s].scale_log2 as f64).exp2() as f32;
                 let centred = |s: usize| if entry.slices[s].sun_zenith_deg <= entry.threshold_sun_zenith_deg { 1.0 } else { 0.0 };
-                params.extend([(weight * scale) as f32, f as f32, i0 as f32, i1 as f32]);
+                params.extend([weight as f32, f as f32, i0 as f32, i1 as f32]);
                 params.extend([slice_scale(i0), slice_scale(i1), centred(i0), centred(i1)]);
             }
             None => params.extend([0.0; 8]),
