@@ -70,6 +70,10 @@ pub struct WorkerArgs {
     #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_sigkill_on_task: Option<u64>,
+    /// Fault injection: take this many milliseconds more to unpack optics
+    #[cfg(feature = "fault-injection")]
+    #[arg(long, hide = true)]
+    fault_slow_unpack_ms: Option<u64>,
 }
 
 fn parse_window(s: &str) -> Result<(u32, u32), String> {
@@ -197,6 +201,7 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
             perturb_tiles: a.fault_perturb,
             protocol_version: a.fault_protocol,
             sigkill_on_task: a.fault_sigkill_on_task,
+            slow_unpack: a.fault_slow_unpack_ms.map(std::time::Duration::from_millis),
         },
     })?;
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;

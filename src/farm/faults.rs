@@ -23,6 +23,8 @@ pub struct WorkerFaults {
     /// On this task (counting from 0), SIGKILL the worker's own process a
     /// moment after the render starts.
     pub sigkill_on_task: Option<u64>,
+    /// Take this long more to unpack optics a task brings (a loaded PC).
+    pub slow_unpack: Option<Duration>,
 }
 
 /// Faults a coordinator commits (the hidden `sky render
@@ -57,6 +59,13 @@ impl WorkerFaults {
                 tokio::time::sleep(Duration::from_millis(150)).await;
                 kill_self();
             });
+        }
+    }
+
+    /// Sleeps the unpacking thread as told.
+    pub(crate) fn unpacking(&self) {
+        if let Some(d) = self.slow_unpack {
+            std::thread::sleep(d);
         }
     }
 

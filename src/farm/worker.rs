@@ -113,6 +113,10 @@ pub struct Shared {
     pool: rayon::ThreadPool,
     /// Prepared optics by optics hash, bounded by `config.optics_budget`.
     optics: MemoryLru<Scene>,
+    /// Optics being unpacked, by optics hash: a task that arrives without
+    /// them meanwhile (its coordinator sent them with an earlier task, now
+    /// cancelled) waits for them instead of asking for them again.
+    unpacking: Mutex<std::collections::HashMap<String, watch::Receiver<Option<Unpacked>>>>,
     pause: Mutex<PauseState>,
     /// True while paused; running tasks watch it.
     paused_tx: watch::Sender<bool>,
@@ -130,6 +134,7 @@ impl Shared {
         let (paused_tx, _) = watch::channel(false);
         Ok(Arc::new(Shared {
             optics: MemoryLru::new(config.optics_budget),
+            unpacking: Mutex::new(Default::default()),
             config,
             pool,
             pause: Mutex::new(PauseState::default()),
@@ -180,9 +185,42 @@ impl Shared {
         PROTOCOL_VERSION
     }
 
-    /// The optics hashes held now, most recently used first.
+    /// The optics hashes held now, most recently used first, then those
+    /// being unpacked (a coordinator need not send them again).
     pub fn optics_held(&self) -> Vec<String> {
-        self.optics.keys()
+        let unpacking = self.unpacking.lock().unwrap();
+        let mut held = self.optics.keys();
+        held.extend(unpacking.keys().filter(|h| !held.contains(h)).cloned().collect::<Vec<_>>());
+        held
+    }
+
+    /// The prepared optics `hash`: held, being unpacked, or else unpacked
+    /// from `carried` (the optics the task brought); None if none of these.
+    /// All under the unpacking lock, which an unpacking takes to unlist
+    /// itself only after it has put its optics in the cache: no moment when
+    /// arriving optics are in neither place, and no optics unpacked twice.
+    fn optics_for(self: &Arc<Self>, hash: &str, carried: Option<proto::Optics>) -> Option<Result<Arc<Scene>, Unpacking>> {
+        let mut unpacking = self.unpacking.lock().unwrap();
+        if let Some(p) = self.optics.get(hash) {
+            return Some(Ok(p));
+        }
+        let Some(rx) = unpacking.get(hash) else {
+            let carried = carried?;
+            let (done, rx) = watch::channel(None);
+            unpacking.insert(hash.to_string(), rx);
+            return Some(Err(unpack(self, carried, hash.to_string(), done)));
+        };
+        let mut rx = rx.clone();
+        Some(Err(tokio::spawn(async move {
+            loop {
+                if let Some(r) = rx.borrow_and_update().clone() {
+                    return r;
+                }
+                if rx.changed().await.is_err() {
+                    return Err(Status::internal("unpacking the optics ended without a result"));
+                }
+            }
+        })))
     }
 
     /// Bytes of prepared optics held now.
@@ -261,19 +299,14 @@ impl Worker for Service {
         // carried by the task.
         let view = open_view(&task.view_json)?;
         task_columns(&task, view.width)?;
-        let prepared = s.optics.get(&task.optics_hash);
-        if prepared.is_none() && task.optics.is_none() {
+        let Some(optics) = s.optics_for(&task.optics_hash, task.optics.take()) else {
             return Err(super::protocol::optics_missing_status(&task.optics_hash));
-        }
+        };
         #[cfg(feature = "fault-injection")]
         if s.config.faults.sigkill_on_task == Some(_started) {
             (s.config.log)(&WorkerEvent::Fault { what: "killing itself mid-task".into() });
             s.config.faults.maybe_kill_during(_started);
         }
-        let optics = match prepared {
-            Some(p) => Ok(p),
-            None => Err(unpack(&s, task.optics.take().expect("checked above"), task.optics_hash.clone())),
-        };
         let (tx, rx) = mpsc::channel::<Result<proto::RenderEvent, Status>>(8);
         tokio::spawn(async move {
             let result = run_task(&s, task, view, optics, &tx).await;
@@ -333,26 +366,42 @@ pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, us
 
 /// Optics a task brought, being unpacked (or prepared) into the cache.
 type Unpacking = tokio::task::JoinHandle<Result<Arc<Scene>, Status>>;
+/// What an unpacking ends with.
+type Unpacked = Result<Arc<Scene>, Status>;
 
 /// Unpacks optics a task carries into the cache, on a blocking thread that
 /// runs to the end whatever becomes of the task: once a coordinator has
-/// sent them, the worker holds them (it counts them as sent).
-fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String) -> Unpacking {
+/// sent them, the worker holds them (it counts them as sent). Tasks that
+/// arrive meanwhile follow it through `done` (`Shared::optics_for`, which
+/// lists it).
+fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String, done: watch::Sender<Option<Unpacked>>) -> Unpacking {
     let shared = s.clone();
-    tokio::task::spawn_blocking(move || -> Result<Arc<Scene>, Status> {
-        if let Some(p) = shared.optics.get(&hash) {
-            return Ok(p);
-        }
-        let (atm, spectral, scene) = open_optics(&o, &hash)?;
-        let (scene, bytes) = match scene {
-            Some(s) => (s, o.scene.len() as u64),
-            None => {
-                let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
-                let bytes = s.encoded_bytes();
-                (s, bytes)
+    tokio::task::spawn_blocking(move || -> Unpacked {
+        // Unlisted however the unpacking ends (a panic included: the
+        // followers then see the channel close).
+        struct Unlist<'a>(&'a Shared, &'a str);
+        impl Drop for Unlist<'_> {
+            fn drop(&mut self) {
+                self.0.unpacking.lock().unwrap().remove(self.1);
             }
-        };
-        Ok(shared.optics.insert(hash, Arc::new(scene), bytes))
+        }
+        let _unlist = Unlist(&shared, &hash);
+        let result = (|| {
+            #[cfg(feature = "fault-injection")]
+            shared.config.faults.unpacking();
+            let (atm, spectral, scene) = open_optics(&o, &hash)?;
+            let (scene, bytes) = match scene {
+                Some(s) => (s, o.scene.len() as u64),
+                None => {
+                    let s = shared.pool.install(|| Scene::new(&atm, &spectral, &shared.config.cache, &|| {}));
+                    let bytes = s.encoded_bytes();
+                    (s, bytes)
+                }
+            };
+            Ok(shared.optics.insert(hash.clone(), Arc::new(scene), bytes))
+        })();
+        done.send_replace(Some(result.clone()));
+        result
     })
 }
 
