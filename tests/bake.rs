@@ -594,3 +594,35 @@ fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
     let missing = sky(&["lut", "interpolation", "nope.toml"], tmp.path());
     assert_eq!(missing.status.code(), Some(1));
 }
+
+/// `sky bench bake --coarse-ms` measures multiple scattering interpolated
+/// from every --stride-th texel on the tiny bake's clear sky: cells are
+/// measured, the figures are finite, and the projected cost with the
+/// coarse grid is below the plain one (only the sampling shrinks); bad
+/// flag combinations are usage errors.
+#[test]
+fn bench_bake_measures_coarse_multiple_scattering() {
+    let tmp = tempfile::tempdir().unwrap();
+    let bake = root().join("tests/bakes/tiny.toml");
+    let args = ["bench", "bake", bake.to_str().unwrap(), "--skies", "clear", "--sun-zenith-deg", "60", "--stride", "2", "--spp", "8", "--reference-spp", "64", "--methods", "quadrature", "--threads", "1"];
+    let r = summary(&sky(&[&args[..], &["--coarse-ms", "--json"]].concat(), tmp.path()));
+    let slice = &r["slices"][0];
+    let m = &slice["coarse_ms"];
+    assert!(m["cells"].as_u64().unwrap() > 0, "{r}");
+    for k in ["rms_rel_error", "noise_floor", "p95_abs_rel_error", "single_share"] {
+        let v = m[k].as_f64().unwrap_or(f64::NAN);
+        assert!(v.is_finite() && v >= 0.0, "{k}: {r}");
+    }
+    for (coarse, plain) in [("coarse_ms_slice_core_seconds_to_target", "slice_core_seconds_to_target"), ("coarse_ms_slice_core_seconds_capped", "slice_core_seconds_capped")] {
+        let (c, p) = (slice[coarse].as_f64().unwrap(), slice[plain].as_f64().unwrap());
+        assert!(c > 0.0 && c < p, "{coarse} {c} against {plain} {p}");
+    }
+    assert!(r["coarse_ms_total_core_hours"].as_f64().unwrap() < r["total_core_hours"][0][1].as_f64().unwrap(), "{r}");
+    let o = sky(&[&args[..], &["--coarse-ms", "--fog"]].concat(), tmp.path());
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut stride_one = args.to_vec();
+    stride_one[args.iter().position(|&a| a == "--stride").unwrap() + 1] = "1";
+    let o = sky(&[&stride_one[..], &["--coarse-ms"]].concat(), tmp.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--stride must be at least 2"), "{}", String::from_utf8_lossy(&o.stderr));
+}

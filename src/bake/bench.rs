@@ -63,6 +63,9 @@ pub struct BenchOptions {
     /// Shadowed Fog, and the Fog's quadrature is priced per texel) instead
     /// of the sky's.
     pub fog: bool,
+    /// Also measure multiple scattering interpolated from every
+    /// `stride`-th texel (see [`super::bench_coarse`]; sky slices only).
+    pub coarse_ms: bool,
 }
 
 /// One estimator on one slice.
@@ -91,6 +94,14 @@ pub struct SliceCost {
     pub slice_core_seconds_capped: f64,
     /// Texels that would hit the sample cap.
     pub capped_fraction: f64,
+    /// With `coarse_ms` (quadrature only): the interpolation's accuracy,
+    /// and the full slice's cost with multiple scattering rendered at every
+    /// `stride`-th texel in both axes (its sampling a stride² part; the
+    /// per-texel overhead, the quadrature's, at every texel), to 1 % and at
+    /// the cap.
+    pub coarse_ms: Option<super::bench_coarse::CoarseMs>,
+    pub coarse_ms_slice_core_seconds_to_target: Option<f64>,
+    pub coarse_ms_slice_core_seconds_capped: Option<f64>,
 }
 
 /// A basis sky's projected final bake for one estimator.
@@ -103,6 +114,9 @@ pub struct SkyCost {
     pub core_hours: f64,
     /// What the final quality spends, its texels stopped at the cap.
     pub capped_core_hours: f64,
+    /// The same with multiple scattering from the coarse grid (`coarse_ms`).
+    pub coarse_ms_core_hours: Option<f64>,
+    pub coarse_ms_capped_core_hours: Option<f64>,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -113,6 +127,10 @@ pub struct BenchReport {
     /// core-hours, to 1 % and at the cap.
     pub total_core_hours: Vec<(SingleScatter, f64)>,
     pub total_capped_core_hours: Vec<(SingleScatter, f64)>,
+    /// With `coarse_ms`: the quadrature's totals with multiple scattering
+    /// from the coarse grid, to 1 % and at the cap.
+    pub coarse_ms_total_core_hours: Option<f64>,
+    pub coarse_ms_total_capped_core_hours: Option<f64>,
 }
 
 /// What can stop the benchmark.
@@ -239,6 +257,9 @@ fn measure(
         slice_core_seconds_to_target: full * (overhead + samples_to_target * core_seconds_per_path),
         slice_core_seconds_capped: full * (overhead + samples_capped * core_seconds_per_path),
         capped_fraction: capped as f64 / m,
+        coarse_ms: None,
+        coarse_ms_slice_core_seconds_to_target: None,
+        coarse_ms_slice_core_seconds_capped: None,
     })
 }
 
@@ -268,36 +289,55 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
     let mut zeniths = o.sun_zenith_deg.clone();
     zeniths.sort_by(f64::total_cmp);
     let zero: Vec<(SingleScatter, f64)> = o.methods.iter().map(|m| (*m, 0.0)).collect();
-    let mut report = BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero };
+    let mut report =
+        BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero, coarse_ms_total_core_hours: None, coarse_ms_total_capped_core_hours: None };
     for sky in bake.skies.iter().filter(|s| o.skies.is_empty() || o.skies.contains(&s.name)) {
         let (atm, _) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BenchError::Atmosphere { sky: sky.name.clone(), error })?;
         // The final quality's optics and cap, whatever the bake file's draft.
         let final_ = sky.sampling(Quality::Final).clone();
         let cap = final_.spp;
         let scene = Scene::new(&atm, &spectral_settings(&final_), mie, &|| {});
-        let mut per_method: Vec<Vec<(f64, f64, f64)>> = vec![Vec::new(); o.methods.len()];
+        // Per method and sun zenith: the slice's cost to 1 % and at the cap,
+        // and the same with multiple scattering from the coarse grid.
+        let mut per_method: Vec<Vec<(f64, [f64; 4])>> = vec![Vec::new(); o.methods.len()];
+        let coarse_ms = o.coarse_ms && !o.fog;
         for &z in &zeniths {
             let fog = o.fog.then_some(&bake.fog);
-            let (reference, _) = timed(&pool, o.threads, &scene, &view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature), cancel)?;
+            let reference_view = view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature);
+            let (reference, _) = timed(&pool, o.threads, &scene, &reference_view, cancel)?;
+            let coarse = if coarse_ms { Some(super::bench_coarse::measure(sky, &reference_view, &reference, &scene, &pool, cancel)?) } else { None };
             for (k, &method) in o.methods.iter().enumerate() {
-                let c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;
+                let mut c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;
+                if let (Some(coarse), SingleScatter::Quadrature) = (&coarse, method) {
+                    // Only the sampling shrinks: the overhead stays at every texel.
+                    let overhead = (sky.width * sky.height) as f64 * c.overhead_core_seconds_per_texel;
+                    let f2 = (o.stride * o.stride) as f64;
+                    c.coarse_ms = Some(coarse.clone());
+                    c.coarse_ms_slice_core_seconds_to_target = Some(overhead + (c.slice_core_seconds_to_target - overhead) / f2);
+                    c.coarse_ms_slice_core_seconds_capped = Some(overhead + (c.slice_core_seconds_capped - overhead) / f2);
+                }
                 on_slice(&c);
-                per_method[k].push((z, c.slice_core_seconds_to_target, c.slice_core_seconds_capped));
+                let coarse_cost = [c.coarse_ms_slice_core_seconds_to_target.unwrap_or(f64::NAN), c.coarse_ms_slice_core_seconds_capped.unwrap_or(f64::NAN)];
+                per_method[k].push((z, [c.slice_core_seconds_to_target, c.slice_core_seconds_capped, coarse_cost[0], coarse_cost[1]]));
                 report.slices.push(c);
             }
         }
         let slice_zeniths: Vec<f64> = (0..sky.slices).map(|i| mapping::slice_sun_zenith_deg(i, atm.planet.radius_km, atm.planet.top_km)).collect();
         for (k, &method) in o.methods.iter().enumerate() {
-            let price = |pick: fn(&(f64, f64, f64)) -> f64| -> f64 {
-                let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, pick(p))).collect();
+            let price = |which: usize| -> f64 {
+                let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, p.1[which])).collect();
                 slice_zeniths.iter().map(|&z| interpolate(&points, z)).sum::<f64>() / 3600.0
             };
-            let (core_hours, capped_core_hours) = (price(|p| p.1), price(|p| p.2));
+            let (core_hours, capped_core_hours) = (price(0), price(1));
             report.total_core_hours[k].1 += core_hours;
             report.total_capped_core_hours[k].1 += capped_core_hours;
-            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours });
+            let coarse = coarse_ms && method == SingleScatter::Quadrature;
+            let (coarse_ms_core_hours, coarse_ms_capped_core_hours) = if coarse { (Some(price(2)), Some(price(3))) } else { (None, None) };
+            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours, coarse_ms_core_hours, coarse_ms_capped_core_hours });
         }
     }
+    let sum = |pick: fn(&SkyCost) -> Option<f64>| report.skies.iter().filter_map(pick).reduce(|a, b| a + b);
+    (report.coarse_ms_total_core_hours, report.coarse_ms_total_capped_core_hours) = (sum(|s| s.coarse_ms_core_hours), sum(|s| s.coarse_ms_capped_core_hours));
     Ok(report)
 }
 

@@ -5,6 +5,7 @@
 //! texture arrays and the manifest follow.
 
 pub mod bench;
+pub mod bench_coarse;
 pub mod cache;
 pub mod file;
 pub mod fog;

@@ -45,6 +45,9 @@ pub struct BenchBakeArgs {
     /// Measure the bake's fog slices (its `[fog]` size; their render is the Shadowed Fog, the Fog's quadrature is priced per texel) instead of its sky slices
     #[arg(long)]
     pub fog: bool,
+    /// Also measure multiple scattering interpolated from every --stride-th texel (the quadrature's Monte Carlo part on a coarser grid): its error at the coarse cells' centres, rendered at the reference's samples, and what it would save
+    #[arg(long, conflicts_with = "fog")]
+    pub coarse_ms: bool,
     /// Machine-readable output
     #[arg(long)]
     pub json: bool,
@@ -89,7 +92,11 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         },
         threads,
         fog: a.fog,
+        coarse_ms: a.coarse_ms,
     };
+    if a.coarse_ms && a.stride < 2 {
+        return usage("--coarse-ms interpolates from every --stride-th texel: --stride must be at least 2");
+    }
     if !a.json {
         let what = if a.fog { "fog slices (the Shadowed Fog's render, the Fog's quadrature)" } else { "sky slices" };
         outln!("final-bake cost of the {what} from every {}th texel, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride, a.spp, a.reference_spp);
@@ -110,6 +117,20 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
                 c.slice_core_seconds_capped,
                 if c.capped_fraction > 0.0 { format!("  ({:.0} % of texels at the cap)", 100.0 * c.capped_fraction) } else { String::new() }
             );
+            if let (Some(m), Some(t), Some(k)) = (&c.coarse_ms, c.coarse_ms_slice_core_seconds_to_target, c.coarse_ms_slice_core_seconds_capped) {
+                eprintln!(
+                    "{:>8}           coarse MS   interpolation error {:.3} % RMS (noise floor {:.3} %, p95 |e| {:.2} %) over {} cells ({} at the horizon left out; single scattering {:.0} % of Y)  {:>10.1} core-s/slice ({:.1} at the cap)",
+                    "",
+                    100.0 * m.rms_rel_error,
+                    100.0 * m.noise_floor,
+                    100.0 * m.p95_abs_rel_error,
+                    m.cells,
+                    m.horizon_cells,
+                    100.0 * m.single_share,
+                    t,
+                    k
+                );
+            }
         }
     };
     let mie = sky::mie::MieCache::from_env();
@@ -126,8 +147,16 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
     for s in &report.skies {
         outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", s.sky, method_name(s.method), s.core_hours, s.capped_core_hours);
     }
+    for s in &report.skies {
+        if let (Some(h), Some(c)) = (s.coarse_ms_core_hours, s.coarse_ms_capped_core_hours) {
+            outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", s.sky, "coarse MS", h, c);
+        }
+    }
     for ((m, h), (_, c)) in report.total_core_hours.iter().zip(&report.total_capped_core_hours) {
         outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", "total", method_name(*m), h, c);
+    }
+    if let (Some(h), Some(c)) = (report.coarse_ms_total_core_hours, report.coarse_ms_total_capped_core_hours) {
+        outln!("  {:>8}  {:<11} {:>10.1} ({:.1})", "total", "coarse MS", h, c);
     }
     Ok(ExitCode::SUCCESS)
 }
