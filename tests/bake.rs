@@ -604,7 +604,8 @@ fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
 fn bench_bake_measures_coarse_multiple_scattering() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
-    let args = ["bench", "bake", bake.to_str().unwrap(), "--skies", "clear", "--sun-zenith-deg", "60", "--stride", "2", "--spp", "8", "--reference-spp", "64", "--methods", "quadrature", "--threads", "1"];
+    let args =
+        ["bench", "bake", bake.to_str().unwrap(), "--skies", "clear", "--sun-zenith-deg", "60", "--stride", "2", "--spp", "8", "--reference-spp", "64", "--methods", "quadrature", "--threads", "1"];
     let r = summary(&sky(&[&args[..], &["--coarse-ms", "--json"]].concat(), tmp.path()));
     let slice = &r["slices"][0];
     let m = &slice["coarse_ms"];
