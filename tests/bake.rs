@@ -610,6 +610,7 @@ fn bench_bake_measures_coarse_multiple_scattering() {
     let slice = &r["slices"][0];
     let m = &slice["coarse_ms"];
     assert!(m["cells"].as_u64().unwrap() > 0, "{r}");
+    assert!(m["far_cells"].as_u64().unwrap() <= m["cells"].as_u64().unwrap(), "{r}");
     for k in ["rms_rel_error", "noise_floor", "p95_abs_rel_error", "single_share"] {
         let v = m[k].as_f64().unwrap_or(f64::NAN);
         assert!(v.is_finite() && v >= 0.0, "{k}: {r}");
@@ -625,5 +626,8 @@ fn bench_bake_measures_coarse_multiple_scattering() {
     stride_one[args.iter().position(|&a| a == "--stride").unwrap() + 1] = "1";
     let o = sky(&[&stride_one[..], &["--coarse-ms"]].concat(), tmp.path());
     assert_eq!(o.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--stride must be at least 2"), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut stride_zero = args.to_vec();
+    stride_zero[args.iter().position(|&a| a == "--stride").unwrap() + 1] = "2x0";
+    assert_eq!(sky(&stride_zero, tmp.path()).status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--stride must exceed 1"), "{}", String::from_utf8_lossy(&o.stderr));
 }

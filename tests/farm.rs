@@ -606,6 +606,19 @@ impl Drop for Hogs {
     }
 }
 
+/// The clear sky (its optics weigh about 19 MB) and a tiny equirect view
+/// of it at 4 spp, hero wavelengths.
+fn clear_equirect(width: usize, height: usize) -> (sky::atmosphere::Atmosphere, sky::atmosphere::Bundle, sky::render::Settings) {
+    use sky::render::{camera::Camera, Settings, WavelengthSampling};
+    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
+    let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
+    s.spectral.xyz = true;
+    s.spectral.wavelength_sampling = WavelengthSampling::Hero;
+    s.view.camera = Camera::Equirect;
+    (s.view.width, s.view.height) = (width, height);
+    (atm, bundle, s)
+}
+
 /// A bake-shaped run: one atmosphere (the clear sky, whose optics weigh
 /// about 19 MB), 64 tiny views through one session over two workers. Each
 /// worker is connected and greeted once and gets the optics at most once;
@@ -616,17 +629,11 @@ impl Drop for Hogs {
 #[test]
 fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
     use sky::farm::coordinator::{Options, WorkerSpec};
-    use sky::render::{camera::Camera, Settings, WavelengthSampling};
     use sky::session::{OpticsCache, Session};
     let mut farm = Farm::new();
     let a = farm.start("a", &[]);
     let b = farm.start("b", &[]);
-    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
-    let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
-    s.spectral.xyz = true;
-    s.spectral.wavelength_sampling = WavelengthSampling::Hero;
-    s.view.camera = Camera::Equirect;
-    (s.view.width, s.view.height) = (4, 4);
+    let (atm, bundle, s) = clear_equirect(4, 4);
     let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
     let opts = Options { token: Some("s3cret-farm-token".into()), ..Options::default() };
     let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), workers, opts, &|| {});
@@ -680,16 +687,10 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
 #[test]
 #[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
 fn a_task_without_optics_waits_for_optics_still_unpacking() {
-    use sky::render::{camera::Camera, Settings, WavelengthSampling};
     use sky::session::{OpticsCache, Session};
     let mut farm = Farm::new();
     let w = farm.start("w", &["--fault-slow-unpack-ms", "3000"]);
-    let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
-    let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
-    s.spectral.xyz = true;
-    s.spectral.wavelength_sampling = WavelengthSampling::Hero;
-    s.view.camera = Camera::Equirect;
-    (s.view.width, s.view.height) = (2, 2);
+    let (atm, bundle, s) = clear_equirect(2, 2);
     let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), vec![], Default::default(), &|| {});
     let job = session.job(&s.view);
     let pv = sky::farm::PROTOCOL_VERSION;

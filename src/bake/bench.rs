@@ -50,8 +50,9 @@ pub struct BenchOptions {
     /// Basis skies by name (all of the bake's when empty).
     pub skies: Vec<String>,
     pub sun_zenith_deg: Vec<f64>,
-    /// Every `stride`-th texel in both axes of a slice.
-    pub stride: usize,
+    /// Every `stride[0]`-th texel along u (columns) and `stride[1]`-th
+    /// along v (rows) of a slice.
+    pub stride: [usize; 2],
     /// Samples per texel of the measured renders.
     pub spp: u32,
     /// Samples per texel of the reference.
@@ -96,7 +97,7 @@ pub struct SliceCost {
     pub capped_fraction: f64,
     /// With `coarse_ms` (quadrature only): the interpolation's accuracy,
     /// and the full slice's cost with multiple scattering rendered at every
-    /// `stride`-th texel in both axes (its sampling a stride² part; the
+    /// `stride`-th texel (its sampling a 1 / (stride_u stride_v) part; the
     /// per-texel overhead, the quadrature's, at every texel), to 1 % and at
     /// the cap.
     pub coarse_ms: Option<super::bench_coarse::CoarseMs>,
@@ -151,15 +152,15 @@ pub enum BenchError {
 /// the Fog LUT's directions at a `stride`-th of its size each way, the
 /// fog slice's render (the Shadowed Fog: it has no single scattering of
 /// sunlight, so `method` changes nothing there).
-fn view(sky: &BasisSky, fog: Option<&FogSettings>, sun_zenith_deg: f64, stride: usize, spp: u32, seed: u64, method: SingleScatter) -> View {
+fn view(sky: &BasisSky, fog: Option<&FogSettings>, sun_zenith_deg: f64, stride: [usize; 2], spp: u32, seed: u64, method: SingleScatter) -> View {
     if let Some(f) = fog {
-        let subset = FogSettings { width: (f.width / stride).max(1), height: (f.height / stride).max(1), ..*f };
+        let subset = FogSettings { width: (f.width / stride[0]).max(1), height: (f.height / stride[1]).max(1), ..*f };
         return View { seed, single_scatter: method, ..super::fog::fog_view_at(sky, &subset, spp, sun_zenith_deg, true) };
     }
     View {
         camera: Camera::Lut { mapping: DirectionMapping::new(sun_zenith_deg, sky.threshold_deg), sun_azimuth_deg: 0.0 },
-        width: (sky.width / stride).max(1),
-        height: (sky.height / stride).max(1),
+        width: (sky.width / stride[0]).max(1),
+        height: (sky.height / stride[1]).max(1),
         sun_zenith_deg,
         sun_azimuth_deg: 0.0,
         altitude_m: sky.altitude_m,
@@ -311,7 +312,7 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
                 if let (Some(coarse), SingleScatter::Quadrature) = (&coarse, method) {
                     // Only the sampling shrinks: the overhead stays at every texel.
                     let overhead = (sky.width * sky.height) as f64 * c.overhead_core_seconds_per_texel;
-                    let f2 = (o.stride * o.stride) as f64;
+                    let f2 = (o.stride[0] * o.stride[1]) as f64;
                     c.coarse_ms = Some(coarse.clone());
                     c.coarse_ms_slice_core_seconds_to_target = Some(overhead + (c.slice_core_seconds_to_target - overhead) / f2);
                     c.coarse_ms_slice_core_seconds_capped = Some(overhead + (c.slice_core_seconds_capped - overhead) / f2);

@@ -5,8 +5,9 @@
 //!
 //! With single scattering by quadrature a texel is SS + MS: SS exact and
 //! cheap at every texel, MS the Monte Carlo part. If MS were rendered only
-//! at every `stride`-th texel in both axes and interpolated bilinearly in
-//! the slice's (u, v), its cost would fall by stride², and what the
+//! at every `stride`-th texel (`--stride UxV`: along u and along v) and
+//! interpolated bilinearly in the slice's (u, v), its cost would fall by
+//! U V, and what the
 //! interpolation costs in accuracy is the question measured here, at the
 //! worst place for a bilinear filter: the centre of each cell of the coarse
 //! grid, where it is the mean of the four corners.
@@ -53,7 +54,18 @@ pub struct CoarseMs {
     pub p95_abs_rel_error: f64,
     /// The mean share of single scattering in Y at the cell centres.
     pub single_share: f64,
+    /// The same error over the cells away from the sun and the horizon
+    /// (centre at least [`FAR_SUN_DEG`] from the sun and
+    /// [`FAR_ELEVATION_DEG`] above the horizon): where the sky is smooth,
+    /// if anywhere.
+    pub far_cells: usize,
+    pub far_rms_rel_error: f64,
+    pub far_noise_floor: f64,
 }
+
+/// What "away from the sun and the horizon" means in [`CoarseMs`], degrees.
+pub const FAR_SUN_DEG: f64 = 15.0;
+pub const FAR_ELEVATION_DEG: f64 = 10.0;
 
 /// Unit vector to (zenith, azimuth) in degrees, for a `directions` camera.
 fn zenith_azimuth_deg(d: DVec3) -> (f64, f64) {
@@ -109,7 +121,11 @@ pub(super) fn measure(sky: &BasisSky, reference_view: &View, reference: &Image, 
         .zip(&centres.pixels)
         .map(|((corners, c), p)| Cell { corners: corners.map(|(a, b)| texel(&reference.pixels[b * nw + a], node_single[b * nw + a])), centre: texel(p, single_y(*c)) })
         .collect();
-    Ok(CoarseMs { horizon_cells, ..interpolation_error(&samples) })
+    let sun = reference_view.sun_direction();
+    let far = |c: DVec3| c.z >= FAR_ELEVATION_DEG.to_radians().sin() && libm::acos(c.dot(sun).clamp(-1.0, 1.0)) >= FAR_SUN_DEG.to_radians();
+    let far_samples: Vec<Cell> = samples.iter().zip(&cells).filter(|(_, (_, c))| far(*c)).map(|(s, _)| s.clone()).collect();
+    let f = interpolation_error(&far_samples);
+    Ok(CoarseMs { horizon_cells, far_cells: f.cells, far_rms_rel_error: f.rms_rel_error, far_noise_floor: f.noise_floor, ..interpolation_error(&samples) })
 }
 
 /// A rendered texel: its luminance, the standard error of that, and the
@@ -122,6 +138,7 @@ struct Texel {
 }
 
 /// A cell of the coarse grid: its four corners and its centre.
+#[derive(Clone)]
 struct Cell {
     corners: [Texel; 4],
     centre: Texel,
@@ -152,6 +169,9 @@ fn interpolation_error(cells: &[Cell]) -> CoarseMs {
         noise_floor: (n2 / k).sqrt(),
         p95_abs_rel_error: abs_e.get((used * 95) / 100).or(abs_e.last()).copied().unwrap_or(f64::NAN),
         single_share: share / k,
+        far_cells: 0,
+        far_rms_rel_error: f64::NAN,
+        far_noise_floor: f64::NAN,
     }
 }
 

@@ -27,9 +27,9 @@ pub struct BenchBakeArgs {
     /// Sun zenith angles of the measured slices, degrees
     #[arg(long, value_delimiter = ',', default_value = "20,60,85,88,91,93,96,99", allow_hyphen_values = true)]
     pub sun_zenith_deg: Vec<f64>,
-    /// Measure every N-th texel of a slice in both axes
-    #[arg(long, default_value_t = 4)]
-    pub stride: usize,
+    /// Measure every N-th texel of a slice in both axes, or every U-th along u (columns) and V-th along v (rows) with UxV
+    #[arg(long, default_value = "4", value_parser = parse_stride)]
+    pub stride: [usize; 2],
     /// Samples per texel of the measured renders
     #[arg(long, default_value_t = 256)]
     pub spp: u32,
@@ -53,6 +53,18 @@ pub struct BenchBakeArgs {
     pub json: bool,
 }
 
+/// "N" (both axes) or "UxV", each at least 1.
+fn parse_stride(s: &str) -> Result<[usize; 2], String> {
+    let parse = |t: &str| match t.trim().parse::<usize>() {
+        Ok(n) if n >= 1 => Ok(n),
+        _ => Err(format!("{t:?} is not a whole number of at least 1")),
+    };
+    match s.split_once('x') {
+        Some((u, v)) => Ok([parse(u)?, parse(v)?]),
+        None => parse(s).map(|n| [n, n]),
+    }
+}
+
 fn method_name(m: SingleScatter) -> &'static str {
     match m {
         SingleScatter::Quadrature => "quadrature",
@@ -61,9 +73,6 @@ fn method_name(m: SingleScatter) -> &'static str {
 }
 
 pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
-    if a.stride == 0 {
-        return usage("--stride must be at least 1");
-    }
     if a.spp < 2 || a.reference_spp < 2 {
         return usage("--spp and --reference-spp must be at least 2");
     }
@@ -94,12 +103,12 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         fog: a.fog,
         coarse_ms: a.coarse_ms,
     };
-    if a.coarse_ms && a.stride < 2 {
-        return usage("--coarse-ms interpolates from every --stride-th texel: --stride must be at least 2");
+    if a.coarse_ms && a.stride[0] * a.stride[1] < 2 {
+        return usage("--coarse-ms interpolates from every --stride-th texel: --stride must exceed 1 in at least one axis");
     }
     if !a.json {
         let what = if a.fog { "fog slices (the Shadowed Fog's render, the Fog's quadrature)" } else { "sky slices" };
-        outln!("final-bake cost of the {what} from every {}th texel, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride, a.spp, a.reference_spp);
+        outln!("final-bake cost of the {what} from every {}th texel along u and {}th along v, {} spp against {} spp references, {threads} thread(s); per-sample relative variance of Y against the reference (own estimate), samples per texel and core-seconds per full slice to 1 %", a.stride[0], a.stride[1], a.spp, a.reference_spp);
     }
     let json = a.json;
     let on_slice = |c: &SliceCost| {
@@ -119,7 +128,7 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
             );
             if let (Some(m), Some(t), Some(k)) = (&c.coarse_ms, c.coarse_ms_slice_core_seconds_to_target, c.coarse_ms_slice_core_seconds_capped) {
                 eprintln!(
-                    "{:>8}           coarse MS   interpolation error {:.3} % RMS (noise floor {:.3} %, p95 |e| {:.2} %) over {} cells ({} at the horizon left out; single scattering {:.0} % of Y)  {:>10.1} core-s/slice ({:.1} at the cap)",
+                    "{:>8}           coarse MS   interpolation error {:.3} % RMS (noise floor {:.3} %, p95 |e| {:.2} %) over {} cells ({} at the horizon left out; single scattering {:.0} % of Y); away from the sun and the horizon {:.3} % (floor {:.3} %, {} cells)  {:>10.1} core-s/slice ({:.1} at the cap)",
                     "",
                     100.0 * m.rms_rel_error,
                     100.0 * m.noise_floor,
@@ -127,6 +136,9 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
                     m.cells,
                     m.horizon_cells,
                     100.0 * m.single_share,
+                    100.0 * m.far_rms_rel_error,
+                    100.0 * m.far_noise_floor,
+                    m.far_cells,
                     t,
                     k
                 );
