@@ -595,31 +595,43 @@ fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
     assert_eq!(missing.status.code(), Some(1));
 }
 
-/// `sky bench bake --coarse-ms` measures multiple scattering interpolated
-/// from every --stride-th texel on the tiny bake's clear sky: cells are
-/// measured, the figures are finite, and the projected cost with the
-/// coarse grid is below the plain one (only the sampling shrinks); bad
-/// flag combinations are usage errors.
+/// `sky bench bake --coarse-ms --coarse-ms-grid` measures multiple
+/// scattering interpolated from every --stride-th texel and from a grid of
+/// its own on the tiny bake's clear sky: cells are measured, the figures
+/// are finite, and the projected cost with either grid is below the plain
+/// one (only the sampling shrinks); bad flag combinations are usage errors.
 #[test]
 fn bench_bake_measures_coarse_multiple_scattering() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let args =
         ["bench", "bake", bake.to_str().unwrap(), "--skies", "clear", "--sun-zenith-deg", "60", "--stride", "2", "--spp", "8", "--reference-spp", "64", "--methods", "quadrature", "--threads", "1"];
-    let r = summary(&sky(&[&args[..], &["--coarse-ms", "--json"]].concat(), tmp.path()));
+    let r = summary(&sky(&[&args[..], &["--coarse-ms", "--coarse-ms-grid", "4x5", "--json"]].concat(), tmp.path()));
     let slice = &r["slices"][0];
-    let m = &slice["coarse_ms"];
-    assert!(m["cells"].as_u64().unwrap() > 0, "{r}");
-    assert!(m["far_cells"].as_u64().unwrap() <= m["cells"].as_u64().unwrap(), "{r}");
-    for k in ["rms_rel_error", "noise_floor", "p95_abs_rel_error", "single_share"] {
-        let v = m[k].as_f64().unwrap_or(f64::NAN);
-        assert!(v.is_finite() && v >= 0.0, "{k}: {r}");
+    let grids = slice["coarse_ms"].as_array().unwrap();
+    assert_eq!(grids.iter().map(|g| g["grid"].as_str().unwrap()).collect::<Vec<_>>(), ["lut 2x2", "own 4x5"], "{r}");
+    for g in grids {
+        let m = &g["accuracy"];
+        assert!(m["cells"].as_u64().unwrap() > 0, "{r}");
+        assert!(m["far_cells"].as_u64().unwrap() <= m["cells"].as_u64().unwrap(), "{r}");
+        for k in ["rms_rel_error", "noise_floor", "p95_abs_rel_error", "single_share"] {
+            let v = m[k].as_f64().unwrap_or(f64::NAN);
+            assert!(v.is_finite() && v >= 0.0, "{k}: {r}");
+        }
+        let f = g["sampled_fraction"].as_f64().unwrap();
+        assert!(f > 0.0 && f < 1.0, "{r}");
+        for k in ["slice_core_seconds_to_target", "slice_core_seconds_capped"] {
+            let (c, p) = (g[k].as_f64().unwrap(), slice[k].as_f64().unwrap());
+            assert!(c > 0.0 && c < p, "{k}: {c} against {p}");
+        }
     }
-    for (coarse, plain) in [("coarse_ms_slice_core_seconds_to_target", "slice_core_seconds_to_target"), ("coarse_ms_slice_core_seconds_capped", "slice_core_seconds_capped")] {
-        let (c, p) = (slice[coarse].as_f64().unwrap(), slice[plain].as_f64().unwrap());
-        assert!(c > 0.0 && c < p, "{coarse} {c} against {plain} {p}");
-    }
-    assert!(r["coarse_ms_total_core_hours"].as_f64().unwrap() < r["total_core_hours"][0][1].as_f64().unwrap(), "{r}");
+    // The lut grid: a quarter of the 4 x 16 texels; the own one: 20 nodes
+    // above the horizon and as many below, of 64 texels.
+    assert_eq!(grids[0]["sampled_fraction"].as_f64(), Some(0.25));
+    assert_eq!(grids[1]["sampled_fraction"].as_f64(), Some(40.0 / 64.0));
+    let totals: Vec<&serde_json::Value> = r["coarse_ms"].as_array().unwrap().iter().filter(|c| c["sky"] == "total").collect();
+    assert_eq!(totals.len(), 2, "{r}");
+    assert!(totals[0]["core_hours"].as_f64().unwrap() < r["total_core_hours"][0][1].as_f64().unwrap(), "{r}");
     let o = sky(&[&args[..], &["--coarse-ms", "--fog"]].concat(), tmp.path());
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
     let mut stride_one = args.to_vec();

@@ -67,6 +67,9 @@ pub struct BenchOptions {
     /// Also measure multiple scattering interpolated from every
     /// `stride`-th texel (see [`super::bench_coarse`]; sky slices only).
     pub coarse_ms: bool,
+    /// Also measure it interpolated from a grid of its own over the sky,
+    /// rows × columns ([`super::bench_coarse::measure_latlong`]).
+    pub coarse_ms_grid: Option<[usize; 2]>,
 }
 
 /// One estimator on one slice.
@@ -95,14 +98,35 @@ pub struct SliceCost {
     pub slice_core_seconds_capped: f64,
     /// Texels that would hit the sample cap.
     pub capped_fraction: f64,
-    /// With `coarse_ms` (quadrature only): the interpolation's accuracy,
-    /// and the full slice's cost with multiple scattering rendered at every
-    /// `stride`-th texel (its sampling a 1 / (stride_u stride_v) part; the
-    /// per-texel overhead, the quadrature's, at every texel), to 1 % and at
-    /// the cap.
-    pub coarse_ms: Option<super::bench_coarse::CoarseMs>,
-    pub coarse_ms_slice_core_seconds_to_target: Option<f64>,
-    pub coarse_ms_slice_core_seconds_capped: Option<f64>,
+    /// With `coarse_ms` or `coarse_ms_grid` (quadrature only): multiple
+    /// scattering from coarser grids.
+    pub coarse_ms: Vec<CoarseCost>,
+}
+
+/// Multiple scattering from a coarser grid, on one slice.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CoarseCost {
+    /// `lut UxV` (every U-th texel along u and V-th along v) or `own RxC`
+    /// (a grid of its own, R rows and C columns over the sky, the same
+    /// again for the ground assumed in the cost).
+    pub grid: String,
+    pub accuracy: super::bench_coarse::CoarseMs,
+    /// The Monte Carlo's part of the full slice's: nodes over texels.
+    pub sampled_fraction: f64,
+    /// The full slice to 1 % and at the cap: the per-texel overhead (the
+    /// quadrature's) at every texel, the sampling at the nodes only.
+    pub slice_core_seconds_to_target: f64,
+    pub slice_core_seconds_capped: f64,
+}
+
+/// A basis sky's projected final bake with multiple scattering from a
+/// coarser grid (see [`CoarseCost`]).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct CoarseSkyCost {
+    pub sky: String,
+    pub grid: String,
+    pub core_hours: f64,
+    pub capped_core_hours: f64,
 }
 
 /// A basis sky's projected final bake for one estimator.
@@ -115,9 +139,6 @@ pub struct SkyCost {
     pub core_hours: f64,
     /// What the final quality spends, its texels stopped at the cap.
     pub capped_core_hours: f64,
-    /// The same with multiple scattering from the coarse grid (`coarse_ms`).
-    pub coarse_ms_core_hours: Option<f64>,
-    pub coarse_ms_capped_core_hours: Option<f64>,
 }
 
 #[derive(Debug, Clone, serde::Serialize)]
@@ -128,10 +149,9 @@ pub struct BenchReport {
     /// core-hours, to 1 % and at the cap.
     pub total_core_hours: Vec<(SingleScatter, f64)>,
     pub total_capped_core_hours: Vec<(SingleScatter, f64)>,
-    /// With `coarse_ms`: the quadrature's totals with multiple scattering
-    /// from the coarse grid, to 1 % and at the cap.
-    pub coarse_ms_total_core_hours: Option<f64>,
-    pub coarse_ms_total_capped_core_hours: Option<f64>,
+    /// The quadrature's projections with multiple scattering from coarser
+    /// grids, per sky and in total (sky "total").
+    pub coarse_ms: Vec<CoarseSkyCost>,
 }
 
 /// What can stop the benchmark.
@@ -258,9 +278,7 @@ fn measure(
         slice_core_seconds_to_target: full * (overhead + samples_to_target * core_seconds_per_path),
         slice_core_seconds_capped: full * (overhead + samples_capped * core_seconds_per_path),
         capped_fraction: capped as f64 / m,
-        coarse_ms: None,
-        coarse_ms_slice_core_seconds_to_target: None,
-        coarse_ms_slice_core_seconds_capped: None,
+        coarse_ms: Vec::new(),
     })
 }
 
@@ -290,8 +308,7 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
     let mut zeniths = o.sun_zenith_deg.clone();
     zeniths.sort_by(f64::total_cmp);
     let zero: Vec<(SingleScatter, f64)> = o.methods.iter().map(|m| (*m, 0.0)).collect();
-    let mut report =
-        BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero, coarse_ms_total_core_hours: None, coarse_ms_total_capped_core_hours: None };
+    let mut report = BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero, coarse_ms: Vec::new() };
     for sky in bake.skies.iter().filter(|s| o.skies.is_empty() || o.skies.contains(&s.name)) {
         let (atm, _) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BenchError::Atmosphere { sky: sky.name.clone(), error })?;
         // The final quality's optics and cap, whatever the bake file's draft.
@@ -299,46 +316,74 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
         let cap = final_.spp;
         let scene = Scene::new(&atm, &spectral_settings(&final_), mie, &|| {});
         // Per method and sun zenith: the slice's cost to 1 % and at the cap,
-        // and the same with multiple scattering from the coarse grid.
-        let mut per_method: Vec<Vec<(f64, [f64; 4])>> = vec![Vec::new(); o.methods.len()];
-        let coarse_ms = o.coarse_ms && !o.fog;
+        // then the same with multiple scattering from each coarser grid.
+        let mut per_method: Vec<Vec<(f64, Vec<[f64; 2]>)>> = vec![Vec::new(); o.methods.len()];
+        let full = (sky.width * sky.height) as f64;
         for &z in &zeniths {
             let fog = o.fog.then_some(&bake.fog);
             let reference_view = view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature);
             let (reference, _) = timed(&pool, o.threads, &scene, &reference_view, cancel)?;
-            let coarse = if coarse_ms { Some(super::bench_coarse::measure(sky, &reference_view, &reference, &scene, &pool, cancel)?) } else { None };
+            // Each coarser grid: its name, accuracy, and nodes over texels.
+            let mut grids = Vec::new();
+            if o.coarse_ms && !o.fog {
+                let m = super::bench_coarse::measure(sky, &reference_view, &reference, &scene, &pool, cancel)?;
+                grids.push((format!("lut {}x{}", o.stride[0], o.stride[1]), m, (reference.width * reference.height) as f64 / full));
+            }
+            if let (Some(g), false) = (o.coarse_ms_grid, o.fog) {
+                let (m, nodes) = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
+                grids.push((format!("own {}x{}", g[0], g[1]), m, (2 * nodes) as f64 / full));
+            }
             for (k, &method) in o.methods.iter().enumerate() {
                 let mut c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;
-                if let (Some(coarse), SingleScatter::Quadrature) = (&coarse, method) {
+                if method == SingleScatter::Quadrature {
                     // Only the sampling shrinks: the overhead stays at every texel.
-                    let overhead = (sky.width * sky.height) as f64 * c.overhead_core_seconds_per_texel;
-                    let f2 = (o.stride[0] * o.stride[1]) as f64;
-                    c.coarse_ms = Some(coarse.clone());
-                    c.coarse_ms_slice_core_seconds_to_target = Some(overhead + (c.slice_core_seconds_to_target - overhead) / f2);
-                    c.coarse_ms_slice_core_seconds_capped = Some(overhead + (c.slice_core_seconds_capped - overhead) / f2);
+                    let overhead = full * c.overhead_core_seconds_per_texel;
+                    let (to_target, capped) = (c.slice_core_seconds_to_target, c.slice_core_seconds_capped);
+                    c.coarse_ms = grids
+                        .iter()
+                        .map(|(grid, accuracy, f)| CoarseCost {
+                            grid: grid.clone(),
+                            accuracy: accuracy.clone(),
+                            sampled_fraction: *f,
+                            slice_core_seconds_to_target: overhead + (to_target - overhead) * f,
+                            slice_core_seconds_capped: overhead + (capped - overhead) * f,
+                        })
+                        .collect();
                 }
                 on_slice(&c);
-                let coarse_cost = [c.coarse_ms_slice_core_seconds_to_target.unwrap_or(f64::NAN), c.coarse_ms_slice_core_seconds_capped.unwrap_or(f64::NAN)];
-                per_method[k].push((z, [c.slice_core_seconds_to_target, c.slice_core_seconds_capped, coarse_cost[0], coarse_cost[1]]));
+                let costs = std::iter::once([c.slice_core_seconds_to_target, c.slice_core_seconds_capped])
+                    .chain(c.coarse_ms.iter().map(|g| [g.slice_core_seconds_to_target, g.slice_core_seconds_capped]))
+                    .collect();
+                per_method[k].push((z, costs));
                 report.slices.push(c);
             }
         }
         let slice_zeniths: Vec<f64> = (0..sky.slices).map(|i| mapping::slice_sun_zenith_deg(i, atm.planet.radius_km, atm.planet.top_km)).collect();
         for (k, &method) in o.methods.iter().enumerate() {
-            let price = |which: usize| -> f64 {
-                let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, p.1[which])).collect();
+            let price = |variant: usize, which: usize| -> f64 {
+                let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, p.1[variant][which])).collect();
                 slice_zeniths.iter().map(|&z| interpolate(&points, z)).sum::<f64>() / 3600.0
             };
-            let (core_hours, capped_core_hours) = (price(0), price(1));
+            let (core_hours, capped_core_hours) = (price(0, 0), price(0, 1));
             report.total_core_hours[k].1 += core_hours;
             report.total_capped_core_hours[k].1 += capped_core_hours;
-            let coarse = coarse_ms && method == SingleScatter::Quadrature;
-            let (coarse_ms_core_hours, coarse_ms_capped_core_hours) = if coarse { (Some(price(2)), Some(price(3))) } else { (None, None) };
-            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours, coarse_ms_core_hours, coarse_ms_capped_core_hours });
+            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours });
+            let grids: Vec<String> = report.slices.last().map(|c| c.coarse_ms.iter().map(|g| g.grid.clone()).collect()).unwrap_or_default();
+            if method == SingleScatter::Quadrature {
+                for (v, grid) in grids.into_iter().enumerate() {
+                    report.coarse_ms.push(CoarseSkyCost { sky: sky.name.clone(), grid, core_hours: price(v + 1, 0), capped_core_hours: price(v + 1, 1) });
+                }
+            }
         }
     }
-    let sum = |pick: fn(&SkyCost) -> Option<f64>| report.skies.iter().filter_map(pick).reduce(|a, b| a + b);
-    (report.coarse_ms_total_core_hours, report.coarse_ms_total_capped_core_hours) = (sum(|s| s.coarse_ms_core_hours), sum(|s| s.coarse_ms_capped_core_hours));
+    let mut totals: Vec<CoarseSkyCost> = Vec::new();
+    for c in &report.coarse_ms {
+        match totals.iter_mut().find(|t| t.grid == c.grid) {
+            Some(t) => (t.core_hours, t.capped_core_hours) = (t.core_hours + c.core_hours, t.capped_core_hours + c.capped_core_hours),
+            None => totals.push(CoarseSkyCost { sky: "total".into(), ..c.clone() }),
+        }
+    }
+    report.coarse_ms.extend(totals);
     Ok(report)
 }
 

@@ -115,17 +115,73 @@ pub(super) fn measure(sky: &BasisSky, reference_view: &View, reference: &Image, 
         use rayon::prelude::*;
         (0..nw * nh).into_par_iter().map(|k| single_y(node(k % nw, k / nw))).collect()
     });
-    let texel = |p: &render::PixelResult, single: f64| Texel { y: p.xyz[1], stderr: p.xyz_stderr[1], single };
-    let samples: Vec<Cell> = cells
+    let samples: Vec<(Cell, DVec3)> = cells
         .iter()
         .zip(&centres.pixels)
-        .map(|((corners, c), p)| Cell { corners: corners.map(|(a, b)| texel(&reference.pixels[b * nw + a], node_single[b * nw + a])), centre: texel(p, single_y(*c)) })
+        .map(|((corners, c), p)| (Cell { corners: corners.map(|(a, b)| texel(&reference.pixels[b * nw + a], node_single[b * nw + a])), centre: texel(p, single_y(*c)) }, *c))
         .collect();
-    let sun = reference_view.sun_direction();
+    Ok(CoarseMs { horizon_cells, ..with_far(&samples, reference_view.sun_direction()) })
+}
+
+fn texel(p: &render::PixelResult, single: f64) -> Texel {
+    Texel { y: p.xyz[1], stderr: p.xyz_stderr[1], single }
+}
+
+/// [`interpolation_error`] over all `cells` (each with its centre's
+/// direction), and over those away from the sun and the horizon.
+fn with_far(cells: &[(Cell, DVec3)], sun: DVec3) -> CoarseMs {
     let far = |c: DVec3| c.z >= FAR_ELEVATION_DEG.to_radians().sin() && libm::acos(c.dot(sun).clamp(-1.0, 1.0)) >= FAR_SUN_DEG.to_radians();
-    let far_samples: Vec<Cell> = samples.iter().zip(&cells).filter(|(_, (_, c))| far(*c)).map(|(s, _)| s.clone()).collect();
-    let f = interpolation_error(&far_samples);
-    Ok(CoarseMs { horizon_cells, far_cells: f.cells, far_rms_rel_error: f.rms_rel_error, far_noise_floor: f.noise_floor, ..interpolation_error(&samples) })
+    let all: Vec<Cell> = cells.iter().map(|(c, _)| c.clone()).collect();
+    let far_cells: Vec<Cell> = cells.iter().filter(|(_, d)| far(*d)).map(|(c, _)| c.clone()).collect();
+    let f = interpolation_error(&far_cells);
+    CoarseMs { far_cells: f.cells, far_rms_rel_error: f.rms_rel_error, far_noise_floor: f.noise_floor, ..interpolation_error(&all) }
+}
+
+/// The direction of row `s` and column `t` (both in [0, 1]) of a grid over
+/// the sky of its own, independent of the LUT's mapping: zenith angles
+/// crowding toward the horizon, θ = θ_max (1 − (1 − s)²) with θ_max
+/// [`LATLONG_MAX_ZENITH_DEG`], and azimuths from the sun's, φ = 180° t
+/// (the sky is mirror-symmetric about the sun's vertical).
+fn latlong_direction(s: f64, t: f64, sun_azimuth_deg: f64) -> DVec3 {
+    let zenith_deg = LATLONG_MAX_ZENITH_DEG * (1.0 - (1.0 - s) * (1.0 - s));
+    crate::render::camera::direction_deg(zenith_deg, sun_azimuth_deg + 180.0 * t)
+}
+
+/// The lowest row of the grid of [`measure_latlong`]: just above the
+/// horizon of an observer on the ground.
+pub const LATLONG_MAX_ZENITH_DEG: f64 = 89.9;
+
+/// Measures multiple scattering interpolated from a grid of its own over
+/// the sky (`rows` × `cols` nodes, see [`latlong_direction`]) instead of the
+/// LUT's texels, whose mapping bends steeply at low sun: nodes and cell
+/// centres rendered at the reference's samples. The sky above the horizon
+/// only (a grid below it, for the ground, would be of the same kind and is
+/// not measured). Returns the figures and the count of nodes.
+pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<(CoarseMs, usize), BenchError> {
+    let az = reference_view.sun_azimuth_deg;
+    let node = |i: usize, j: usize| latlong_direction(j as f64 / (rows - 1) as f64, i as f64 / (cols - 1) as f64, az);
+    let centre = |i: usize, j: usize| latlong_direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64, az);
+    let mut dirs: Vec<DVec3> = (0..rows * cols).map(|k| node(k % cols, k / cols)).collect();
+    dirs.extend((0..(rows - 1) * (cols - 1)).map(|k| centre(k % (cols - 1), k / (cols - 1))));
+    let view = View {
+        single_scatter: reference_view.single_scatter,
+        sun_azimuth_deg: az,
+        ..View::directions(dirs.iter().map(|d| zenith_azimuth_deg(*d)).collect(), reference_view.sun_zenith_deg, reference_view.altitude_m, reference_view.spp, CENTRE_SEED)
+    };
+    let img = pool.install(|| render::render(scene, &view, cancel, &|| {})).map_err(|_| BenchError::Cancelled)?;
+    let at = |k: usize| texel(&img.pixels[k], render::single_by_quadrature(scene, &view, dirs[k]).0[1]);
+    let nodes: Vec<Texel> = pool.install(|| {
+        use rayon::prelude::*;
+        (0..rows * cols).into_par_iter().map(at).collect()
+    });
+    let cells: Vec<(Cell, DVec3)> = (0..(rows - 1) * (cols - 1))
+        .map(|k| {
+            let (i, j) = (k % (cols - 1), k / (cols - 1));
+            let corners = [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)].map(|(a, b)| nodes[b * cols + a]);
+            (Cell { corners, centre: at(rows * cols + k) }, dirs[rows * cols + k])
+        })
+        .collect();
+    Ok((with_far(&cells, reference_view.sun_direction()), rows * cols))
 }
 
 /// A rendered texel: its luminance, the standard error of that, and the
