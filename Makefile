@@ -10,7 +10,7 @@ space := $(empty) $(empty)
 SKY := target/release/sky
 OUT ?= out
 
-.PHONY: all build test ktx-parse openjd lavapipe cxx golden-update preview-sheet demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures
+.PHONY: all build test ktx-parse openjd lavapipe cxx golden-update preview-sheet demo bench plots regen-data regen-reference clean sunsets cloudy validate fuzz lut-figures final-cost fog-pictures pgo pgo-compare
 
 all: build
 
@@ -89,6 +89,17 @@ demo: build lavapipe
 # Benchmarks reported in the README.
 bench: build
 	$(SKY) bench mie
+
+# A profile-guided build of sky (issue 12): trained on a draft bake of
+# bakes/demo.toml, into target/pgo/release/sky, for bakes and `sky worker`
+# PCs (installs the llvm-profdata that matches rustc's LLVM when missing).
+# pgo-compare times it against the plain build on the same draft bake,
+# alternating rounds, and checks that the two bake the same bytes.
+pgo:
+	scripts/pgo.sh build
+
+pgo-compare:
+	scripts/pgo.sh compare
 
 # Regenerate committed data from pinned PyPI packages (needs python3 and network).
 regen-data:
