@@ -319,19 +319,23 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
         // then the same with multiple scattering from each coarser grid.
         let mut per_method: Vec<Vec<(f64, Vec<[f64; 2]>)>> = vec![Vec::new(); o.methods.len()];
         let full = (sky.width * sky.height) as f64;
+        // The coarser grids measured, by name, in the order of each slice's `coarse_ms`.
+        let lut_grid = (o.coarse_ms && !o.fog).then(|| format!("lut {}x{}", o.stride[0], o.stride[1]));
+        let own_grid = o.coarse_ms_grid.filter(|_| !o.fog);
+        let grid_names: Vec<String> = lut_grid.iter().cloned().chain(own_grid.map(|g| format!("own {}x{}", g[0], g[1]))).collect();
         for &z in &zeniths {
             let fog = o.fog.then_some(&bake.fog);
             let reference_view = view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature);
             let (reference, _) = timed(&pool, o.threads, &scene, &reference_view, cancel)?;
-            // Each coarser grid: its name, accuracy, and nodes over texels.
+            // Each coarser grid's accuracy and nodes over texels.
             let mut grids = Vec::new();
-            if o.coarse_ms && !o.fog {
+            if lut_grid.is_some() {
                 let m = super::bench_coarse::measure(sky, &reference_view, &reference, &scene, &pool, cancel)?;
-                grids.push((format!("lut {}x{}", o.stride[0], o.stride[1]), m, (reference.width * reference.height) as f64 / full));
+                grids.push((m, (reference.width * reference.height) as f64 / full));
             }
-            if let (Some(g), false) = (o.coarse_ms_grid, o.fog) {
+            if let Some(g) = own_grid {
                 let (m, nodes) = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
-                grids.push((format!("own {}x{}", g[0], g[1]), m, (2 * nodes) as f64 / full));
+                grids.push((m, (2 * nodes) as f64 / full));
             }
             for (k, &method) in o.methods.iter().enumerate() {
                 let mut c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;
@@ -339,9 +343,10 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
                     // Only the sampling shrinks: the overhead stays at every texel.
                     let overhead = full * c.overhead_core_seconds_per_texel;
                     let (to_target, capped) = (c.slice_core_seconds_to_target, c.slice_core_seconds_capped);
-                    c.coarse_ms = grids
+                    c.coarse_ms = grid_names
                         .iter()
-                        .map(|(grid, accuracy, f)| CoarseCost {
+                        .zip(&grids)
+                        .map(|(grid, (accuracy, f))| CoarseCost {
                             grid: grid.clone(),
                             accuracy: accuracy.clone(),
                             sampled_fraction: *f,
@@ -368,10 +373,9 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
             report.total_core_hours[k].1 += core_hours;
             report.total_capped_core_hours[k].1 += capped_core_hours;
             report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours });
-            let grids: Vec<String> = report.slices.last().map(|c| c.coarse_ms.iter().map(|g| g.grid.clone()).collect()).unwrap_or_default();
             if method == SingleScatter::Quadrature {
-                for (v, grid) in grids.into_iter().enumerate() {
-                    report.coarse_ms.push(CoarseSkyCost { sky: sky.name.clone(), grid, core_hours: price(v + 1, 0), capped_core_hours: price(v + 1, 1) });
+                for (v, grid) in grid_names.iter().enumerate() {
+                    report.coarse_ms.push(CoarseSkyCost { sky: sky.name.clone(), grid: grid.clone(), core_hours: price(v + 1, 0), capped_core_hours: price(v + 1, 1) });
                 }
             }
         }

@@ -189,9 +189,9 @@ impl Shared {
     /// being unpacked (a coordinator need not send them again).
     pub fn optics_held(&self) -> Vec<String> {
         let unpacking = self.unpacking.lock().unwrap();
-        let mut held = self.optics.keys();
-        held.extend(unpacking.keys().filter(|h| !held.contains(h)).cloned().collect::<Vec<_>>());
-        held
+        let held = self.optics.keys();
+        let arriving: Vec<String> = unpacking.keys().filter(|h| !held.contains(h)).cloned().collect();
+        [held, arriving].concat()
     }
 
     /// The prepared optics `hash`: held, being unpacked, or else unpacked
