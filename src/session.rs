@@ -11,7 +11,7 @@
 //! travel under that hash too, to each worker once.
 
 use crate::atmosphere::{Atmosphere, Bundle};
-use crate::farm::coordinator::{self, Farm, FarmError, Options, Outcome, WorkerSpec};
+use crate::farm::coordinator::{self, Farm, FarmError, FarmPart, Options, PartsOutcome, WorkerSpec};
 use crate::farm::job::{FarmJob, Optics};
 use crate::farm::journal::Journal;
 use crate::farm::proto;
@@ -80,29 +80,67 @@ impl OpticsCache {
     }
 }
 
-/// One atmosphere and spectral setting with their prepared optics, and the
-/// workers and farm policy its views render with. The farm (its runtime,
-/// its worker connections, what optics each worker holds) is made at the
-/// first render and kept for the next views: a worker is greeted once and
-/// gets the optics at most once per session, however many views it renders.
-pub struct Session {
-    pub atmosphere: Atmosphere,
-    pub spectral: SpectralSettings,
-    pub scene: Arc<Scene>,
-    /// The optics as they travel, under their hash.
-    optics: Arc<Optics>,
+/// Workers and farm policy, with the farm (its runtime, its worker
+/// connections, what optics each worker holds) made at the first render
+/// and kept for the next: a worker is greeted once and gets each optics at
+/// most once, however many views it renders. Sessions of several
+/// atmospheres can share one, and render their views in one queue
+/// ([`SharedFarm::render_parts`]).
+pub struct SharedFarm {
     workers: Vec<WorkerSpec>,
     options: Options,
     farm: Mutex<Option<(tokio::runtime::Runtime, Farm)>>,
 }
 
-impl Drop for Session {
+impl Drop for SharedFarm {
     fn drop(&mut self) {
         if let Some((rt, farm)) = self.farm.get_mut().ok().and_then(Option::take) {
             drop(farm);
             rt.shutdown_background();
         }
     }
+}
+
+impl SharedFarm {
+    /// A farm of `workers` (the embedded worker when empty).
+    pub fn new(workers: Vec<WorkerSpec>, options: Options) -> Arc<SharedFarm> {
+        Arc::new(SharedFarm { workers, options, farm: Mutex::new(None) })
+    }
+
+    /// Renders `parts` (jobs of any sessions' optics) in one queue, in
+    /// their order (see [`Farm::render_parts`]).
+    pub fn render_parts(&self, parts: Vec<FarmPart>, cancel: Arc<AtomicBool>) -> Result<PartsOutcome, FarmError> {
+        let mut farm = self.farm.lock().unwrap_or_else(|e| e.into_inner());
+        if farm.is_none() {
+            let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
+            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
+            *farm = Some((rt, Farm::new(workers)));
+        }
+        let (rt, farm) = farm.as_mut().expect("made above");
+        rt.block_on(farm.render_parts(parts, &self.options, cancel))
+    }
+}
+
+/// A view's image from its columns (each top to bottom).
+pub fn image_of_columns(columns: &[Vec<crate::render::PixelResult>], width: usize, height: usize) -> Image {
+    let mut pixels = Vec::with_capacity(width * height);
+    for y in 0..height {
+        for col in columns {
+            pixels.push(col[y].clone());
+        }
+    }
+    Image { width, height, pixels }
+}
+
+/// One atmosphere and spectral setting with their prepared optics, and the
+/// farm its views render on (its own, or one shared with other sessions).
+pub struct Session {
+    pub atmosphere: Atmosphere,
+    pub spectral: SpectralSettings,
+    pub scene: Arc<Scene>,
+    /// The optics as they travel, under their hash.
+    optics: Arc<Optics>,
+    farm: Arc<SharedFarm>,
 }
 
 /// A view's pixels as the farm delivered them.
@@ -124,9 +162,14 @@ impl Session {
         options: Options,
         on_step: &(dyn Fn() + Sync),
     ) -> Session {
+        Session::on_farm(atmosphere, bundle, spectral, cache, mie, SharedFarm::new(workers, options), on_step)
+    }
+
+    /// A session rendering on `farm`, which other sessions may share.
+    pub fn on_farm(atmosphere: Atmosphere, bundle: Bundle, spectral: SpectralSettings, cache: &OpticsCache, mie: &MieCache, farm: Arc<SharedFarm>, on_step: &(dyn Fn() + Sync)) -> Session {
         let scene = cache.get(&atmosphere, &spectral, mie, on_step);
         let optics = Arc::new(Optics::new(&atmosphere, bundle, scene.clone()));
-        Session { atmosphere, spectral, scene, optics, workers, options, farm: Mutex::new(None) }
+        Session { atmosphere, spectral, scene, optics, farm }
     }
 
     /// The hash the session's optics travel under ([`optics_hash`]).
@@ -143,21 +186,8 @@ impl Session {
     /// an earlier run already in `resumed` and new ones going to `journal`.
     pub fn render(&self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, cancel: Arc<AtomicBool>) -> Result<Rendered, FarmError> {
         let (width, height) = (job.settings.view.width, job.settings.view.height);
-        let mut farm = self.farm.lock().unwrap_or_else(|e| e.into_inner());
-        if farm.is_none() {
-            let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
-            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
-            *farm = Some((rt, Farm::new(workers)));
-        }
-        let (rt, farm) = farm.as_mut().expect("made above");
-        let outcome: Outcome = rt.block_on(farm.render(job, resumed, journal, &self.options, cancel))?;
-        let mut pixels = Vec::with_capacity(width * height);
-        for y in 0..height {
-            for col in &outcome.columns {
-                pixels.push(col[y].clone());
-            }
-        }
-        Ok(Rendered { image: Image { width, height, pixels }, stats: outcome.stats })
+        let outcome = self.farm.render_parts(vec![FarmPart { job, resumed, journal }], cancel)?;
+        Ok(Rendered { image: image_of_columns(&outcome.parts[0], width, height), stats: outcome.stats })
     }
 
     /// [`Session::render`] of a view from scratch.

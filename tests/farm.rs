@@ -678,6 +678,54 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
     }
 }
 
+/// Views of two atmospheres in one queue on one farm (what a bake does
+/// with its basis skies): each comes back bit-identical to a direct render,
+/// each worker is connected and greeted once and gets each atmosphere's
+/// optics at most once, and the cost of the whole is measured per part.
+#[test]
+fn two_atmospheres_render_in_one_queue_on_one_farm() {
+    use sky::farm::coordinator::{FarmPart, Options, WorkerSpec};
+    use sky::session::{image_of_columns, OpticsCache, Session, SharedFarm};
+    let mut farm = Farm::new();
+    let a = farm.start("a", &[]);
+    let b = farm.start("b", &[]);
+    let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
+    let shared = SharedFarm::new(workers, Options { token: Some("s3cret-farm-token".into()), max_batch: 2, ..Options::default() });
+    let (clear, clear_bundle, s) = clear_equirect(6, 3);
+    let (hazed, hazed_bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/hazed.toml")).unwrap();
+    let (optics, mie) = (OpticsCache::default(), sky::mie::MieCache::new(None));
+    let sessions = [
+        Session::on_farm(clear, clear_bundle, s.spectral.clone(), &optics, &mie, shared.clone(), &|| {}),
+        Session::on_farm(hazed, hazed_bundle, s.spectral.clone(), &optics, &mie, shared.clone(), &|| {}),
+    ];
+    assert_ne!(sessions[0].optics_hash(), sessions[1].optics_hash());
+    // Two views of each, of different heights: four parts.
+    let views: Vec<(usize, sky::render::View)> =
+        [(0, 3), (1, 3), (0, 5), (1, 2)].into_iter().map(|(k, height)| (k, sky::render::View { height, sun_zenith_deg: 40.0 + 10.0 * height as f64, ..s.view.clone() })).collect();
+    let parts = views.iter().map(|(k, v)| FarmPart { job: sessions[*k].job(v), resumed: Default::default(), journal: None }).collect();
+    let out = shared.render_parts(parts, Arc::new(AtomicBool::new(false))).unwrap();
+    assert_eq!(out.parts.len(), 4);
+    for ((k, v), columns) in views.iter().zip(&out.parts) {
+        let want = sky::render::render(&sessions[*k].scene, v, &AtomicBool::new(false), &|| {}).unwrap();
+        assert!(image_of_columns(columns, v.width, v.height) == want, "a part of atmosphere {k} differs from its direct render");
+    }
+    assert!(out.busy_s.iter().all(|&s| s > 0.0), "{:?}", out.busy_s);
+    assert_eq!(out.stats.columns_total, 24);
+    for w in &out.stats.workers {
+        assert_eq!((w.connects, w.hellos), (1, 1), "{w:?}");
+        assert!(w.optics_sent <= 2, "worker {} got optics {} times for two atmospheres", w.address, w.optics_sent);
+    }
+    // The queue was shared: both workers took tasks.
+    assert!(out.stats.workers.iter().all(|w| w.tasks_done > 0), "{:?}", out.stats.workers);
+    // A second render on the same farm greets nobody again, and no worker
+    // gets an atmosphere's optics a second time.
+    let again = shared.render_parts(vec![FarmPart { job: sessions[1].job(&views[1].1), resumed: Default::default(), journal: None }], Arc::new(AtomicBool::new(false))).unwrap();
+    for (w, before) in again.stats.workers.iter().zip(&out.stats.workers) {
+        assert_eq!((w.address.as_str(), w.connects, w.hellos), (before.address.as_str(), 0, 0), "{w:?}");
+        assert!(before.optics_sent + w.optics_sent <= 2, "worker {} got optics {} times for two atmospheres", w.address, before.optics_sent + w.optics_sent);
+    }
+}
+
 /// Optics keep arriving after the task that brought them is cancelled (a
 /// duplicate finished first elsewhere): a task that comes without them
 /// meanwhile waits for them instead of being told they are missing (which
@@ -729,9 +777,9 @@ fn a_task_without_optics_waits_for_optics_still_unpacking() {
 }
 
 /// `sky bake-luts` over two `sky worker` daemons: each basis sky's slices
-/// go to the farm as one job (a strip of slices), the fog slices a job
-/// each, and the baked files are byte-identical to those of the embedded
-/// worker.
+/// go to the farm as one job (a strip of slices), the skies' strips in one
+/// queue, the fog slices a job each, and the baked files are byte-identical
+/// to those of the embedded worker.
 #[test]
 fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
     let mut farm = Farm::new();

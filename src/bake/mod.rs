@@ -109,6 +109,8 @@ pub enum BakeError {
     Render { sky: String, index: usize, source: crate::farm::coordinator::FarmError },
     #[error("basis sky {sky}, slices {first} to {last}: {source}")]
     RenderSlices { sky: String, first: usize, last: usize, source: crate::farm::coordinator::FarmError },
+    #[error("the slices of basis skies {skies}: {source}")]
+    RenderQueue { skies: String, source: crate::farm::coordinator::FarmError },
     #[error("the bake's journal: {0}")]
     Journal(crate::farm::journal::JournalError),
     #[error("--slice {0}: no such basis sky or slice (NAME:INDEX, INDEX from 0 to 63)")]
@@ -127,6 +129,12 @@ impl BakeError {
     /// Whether the bake was stopped (Ctrl-C) rather than failed.
     pub fn is_cancelled(&self) -> bool {
         use crate::farm::coordinator::FarmError;
-        matches!(self, BakeError::Cancelled | BakeError::Render { source: FarmError::Cancelled, .. } | BakeError::RenderSlices { source: FarmError::Cancelled, .. })
+        matches!(
+            self,
+            BakeError::Cancelled
+                | BakeError::Render { source: FarmError::Cancelled, .. }
+                | BakeError::RenderSlices { source: FarmError::Cancelled, .. }
+                | BakeError::RenderQueue { source: FarmError::Cancelled, .. }
+        )
     }
 }

@@ -4,13 +4,15 @@
 //! rendered through a [`Session`] (optics prepared once per basis sky) when
 //! it is not.
 //!
-//! The slices a basis sky has to render go to the farm as one job, a strip
-//! of slices side by side ([`Camera::LutStrip`]): workers take columns
-//! from one queue across the slices and wait only at the end of a basis
-//! sky, not at the end of every slice. The strip's columns are journaled
-//! in the cache folder, so a bake killed in the middle of a basis sky
-//! resumes from the columns it had; its slices go into the cache once the
-//! strip is done.
+//! The slices a basis sky has to render make one farm job, a strip of
+//! slices side by side ([`Camera::LutStrip`]), and the strips of every
+//! basis sky go to one farm (its workers greeted once, each sky's optics
+//! sent to each worker once) as one queue of columns
+//! ([`SharedFarm::render_parts`]): workers go from slice to slice and from
+//! sky to sky and wait only at the end of the bake's rendering, not at the
+//! end of every slice or sky. Each strip's columns are journaled in the
+//! cache folder, so a bake killed anywhere resumes from the columns it
+//! had; the slices go into the cache once the queue is done.
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BakeFile, BasisSky, Quality, Sampling};
@@ -18,7 +20,7 @@ use super::fog::FogTodo;
 use super::lighting::{lighting_key, SkyLighting};
 use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
 use crate::atmosphere::Atmosphere;
-use crate::farm::coordinator::{Options, WorkerSpec};
+use crate::farm::coordinator::{FarmError, FarmPart, Options, WorkerSpec};
 use crate::farm::events::{EventSink, FarmEvent};
 use crate::farm::journal::{Header, Journal};
 use crate::lut::mapping::{self, DirectionMapping};
@@ -26,7 +28,7 @@ use crate::mie::MieCache;
 use crate::render::camera::Camera;
 use crate::render::tracer::Estimator;
 use crate::render::{adaptive, Image, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
-use crate::session::{OpticsCache, Session};
+use crate::session::{OpticsCache, Session, SharedFarm};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -166,8 +168,8 @@ struct Tracker {
     slices_done: usize,
     /// The slice being rendered (or planned).
     current: (String, usize),
-    /// The strip of slices being rendered: one farm job.
-    job: Option<StripJob>,
+    /// The slices being rendered in one queue (one farm render).
+    job: Option<QueueJob>,
     /// Seconds spent preparing optics and rendering pilots (not the
     /// slices), left out of the rate.
     prep_s: f64,
@@ -188,8 +190,6 @@ impl Tracker {
         }
     }
 
-    /// Progress with `in_job` texels of the current strip done; the slice
-    /// they reach becomes the current one.
     /// Planning is over (it began at `start`): the forecast of `total`
     /// core-seconds and `samples`, from "pilots" or "probes", is the ETA's.
     fn forecast(&mut self, from: &'static str, start: Instant, total: f64, samples: u64) {
@@ -200,12 +200,14 @@ impl Tracker {
         self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * self.cores as f64 });
     }
 
+    /// Progress with `in_job` texels of the current queue done; the slice
+    /// they reach becomes the current one.
     fn progress(&mut self, in_job: u64, stalled: Option<String>) -> BakeProgress {
         let elapsed_s = self.start.elapsed().as_secs_f64();
         let texels_done = (self.texels_before + in_job).min(self.texels_total);
         let in_forecast = match &self.job {
             Some(j) => {
-                self.current = (j.sky.clone(), j.slice_at(in_job));
+                self.current = j.slice_at(in_job);
                 j.forecast_at(in_job)
             }
             None => 0.0,
@@ -233,34 +235,47 @@ impl Tracker {
     }
 }
 
-/// The slices of one basis sky rendered as one farm job: a strip of
-/// `indices.len()` slices, each `slice_width` columns wide.
-struct StripJob {
-    sky: String,
-    indices: Vec<usize>,
-    slice_width: usize,
-    height: usize,
-    /// The pilots' forecast of the slices before each one (core-seconds),
-    /// `indices.len() + 1` values.
+/// Slices rendered in one queue, in its order: the strips of several basis
+/// skies (each strip one farm job), or one fog slice.
+struct QueueJob {
+    /// Each slice's basis sky, index and texels.
+    slices: Vec<(String, usize, u64)>,
+    /// Texels of the slices before each one, `slices.len() + 1` values.
+    cumulative_texels: Vec<u64>,
+    /// The forecast of the slices before each one (core-seconds), `slices.len() + 1` values.
     cumulative_forecast: Vec<f64>,
 }
 
-impl StripJob {
-    /// Where `texels` done put the farm in the strip, in slices: the farm
-    /// hands out columns from the left, so the texels done are mostly the
-    /// leftmost ones (those in flight make this approximate).
+impl QueueJob {
+    /// The queue of `slices` with their forecast core-seconds.
+    fn new(slices: Vec<(String, usize, u64)>, forecasts: &[f64]) -> QueueJob {
+        let mut cumulative_texels = vec![0];
+        let mut cumulative_forecast = vec![0.0];
+        for (s, f) in slices.iter().zip(forecasts) {
+            cumulative_texels.push(cumulative_texels.last().unwrap() + s.2);
+            cumulative_forecast.push(cumulative_forecast.last().unwrap() + f);
+        }
+        QueueJob { slices, cumulative_texels, cumulative_forecast }
+    }
+
+    /// Where `texels` done put the farm in the queue, in slices: the farm
+    /// hands out columns from the start, so the texels done are mostly the
+    /// first ones (those in flight make this approximate).
     fn position(&self, texels: u64) -> f64 {
-        (texels as f64 / (self.height * self.slice_width).max(1) as f64).min(self.indices.len() as f64)
+        let c = &self.cumulative_texels;
+        let k = c.partition_point(|&t| t <= texels).saturating_sub(1).min(self.slices.len() - 1);
+        (k as f64 + (texels - c[k].min(texels)) as f64 / self.slices[k].2.max(1) as f64).min(self.slices.len() as f64)
     }
 
-    fn slice_at(&self, texels: u64) -> usize {
-        self.indices[(self.position(texels) as usize).min(self.indices.len() - 1)]
+    fn slice_at(&self, texels: u64) -> (String, usize) {
+        let (sky, index, _) = &self.slices[(self.position(texels) as usize).min(self.slices.len() - 1)];
+        (sky.clone(), *index)
     }
 
-    /// The forecast core-seconds of the strip's texels done.
+    /// The forecast core-seconds of the queue's texels done.
     fn forecast_at(&self, texels: u64) -> f64 {
         let x = self.position(texels);
-        let k = (x as usize).min(self.indices.len() - 1);
+        let k = (x as usize).min(self.slices.len() - 1);
         let c = &self.cumulative_forecast;
         c[k] + (x - k as f64) * (c[k + 1] - c[k])
     }
@@ -419,6 +434,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, fog_slices, texels_to_render });
 
     let optics = OpticsCache::default();
+    // One farm for the whole bake: its workers are greeted once and get
+    // each basis sky's optics once.
+    let farm = SharedFarm::new(opts.workers.clone(), farm_options(opts, &tracker));
     // Every basis sky's session first (optics prepared once), then, where
     // the quality samples adaptively, every slice's pilot: the forecast
     // behind the ETA, before the first slice is rendered.
@@ -430,7 +448,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         }
         tracker.lock().unwrap().emit(BakeEvent::Preparing { sky: p.out.sky.name.clone() });
         let prep = Instant::now();
-        let session = Session::new(p.atm.clone(), p.bundle.clone(), p.out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {});
+        let session = Session::on_farm(p.atm.clone(), p.bundle.clone(), p.out.spectral.clone(), &optics, mie, farm.clone(), &|| {});
         tracker.lock().unwrap().prep_s += prep.elapsed().as_secs_f64();
         sessions.push(Some(session));
     }
@@ -545,6 +563,49 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         }
         tracker.lock().unwrap().forecast("probes", start, total, samples);
     }
+    // Every basis sky's slices to render, in one queue: each sky's strip
+    // is one farm job, and a worker done with one sky's columns goes on to
+    // the next sky's without waiting for the slowest column of the first.
+    let to_render: Vec<Vec<usize>> = plan.iter().map(|p| (0..p.views.len()).filter(|&i| p.views[i].is_some() && p.same_as[i].is_none()).collect()).collect();
+    let mut strips: Vec<Option<StripOutcome>> = (0..plan.len()).map(|_| None).collect();
+    let mut queued: Vec<QueuedStrip> = Vec::new();
+    let mut parts = Vec::new();
+    for (k, p) in plan.iter().enumerate() {
+        let (Some(session), false) = (&sessions[k], to_render[k].is_empty()) else { continue };
+        let slice_views: Vec<&View> = to_render[k].iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
+        let strip = strip_view(&slice_views);
+        let (part, journal, resumed) = journaled_part(session, &strip, &opts.cache)?;
+        parts.push(part);
+        queued.push(QueuedStrip { k, sky: p.out.sky.name.clone(), slice_width: slice_views[0].width, strip, journal, resumed });
+    }
+    if !parts.is_empty() {
+        if cancel.load(Ordering::SeqCst) {
+            return Err(BakeError::Cancelled);
+        }
+        {
+            let slices: Vec<(String, usize, u64)> = queued.iter().flat_map(|q| to_render[q.k].iter().map(|&i| (q.sky.clone(), i, (q.slice_width * q.strip.height) as u64))).collect();
+            let slice_forecasts: Vec<f64> = queued.iter().flat_map(|q| to_render[q.k].iter().map(|&i| forecasts[q.k][i])).collect();
+            let mut t = tracker.lock().unwrap();
+            t.current = (slices[0].0.clone(), slices[0].1);
+            t.job = Some(QueueJob::new(slices, &slice_forecasts));
+        }
+        let start = Instant::now();
+        let outcome = farm.render_parts(parts, cancel.clone()).map_err(|source| queue_error(&queued, &to_render, source))?;
+        let core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
+        for q in &queued {
+            let _ = std::fs::remove_file(&q.journal);
+        }
+        // The render's cost shared by the skies in proportion to the time
+        // their tasks took on the workers (a cloudy column costs several
+        // clear ones).
+        let busy_total: f64 = outcome.busy_s.iter().sum();
+        for ((q, columns), busy_s) in queued.iter().zip(&outcome.parts).zip(&outcome.busy_s) {
+            let image = crate::session::image_of_columns(columns, q.strip.width, q.strip.height);
+            let share = if busy_total > 0.0 { busy_s / busy_total } else { 0.0 };
+            strips[q.k] = Some(StripOutcome { image, core_seconds: core_seconds * share, resumed: q.resumed });
+        }
+        tracker.lock().unwrap().job = None;
+    }
     let mut done = Vec::new();
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
     for (k, (Planned { mut out, views, same_as, bundle, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
@@ -562,27 +623,10 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
-        if let Some(session) = &session {
-            // Every view to render, once: one strip, one farm job, so that
-            // workers go from slice to slice without waiting at each.
-            let todo: Vec<usize> = (0..views.len()).filter(|&i| views[i].is_some() && same_as[i].is_none()).collect();
-            if !todo.is_empty() {
-                if cancel.load(Ordering::SeqCst) {
-                    return Err(BakeError::Cancelled);
-                }
-                let slice_views: Vec<&View> = todo.iter().map(|&i| &views[i].as_ref().expect("to render").0).collect();
-                let strip = strip_view(&slice_views);
-                let (w, h) = (slice_views[0].width, slice_views[0].height);
-                {
-                    let mut cumulative = vec![0.0];
-                    for &i in &todo {
-                        cumulative.push(cumulative.last().unwrap() + forecasts[k][i]);
-                    }
-                    let mut t = tracker.lock().unwrap();
-                    t.current = (name.clone(), todo[0]);
-                    t.job = Some(StripJob { sky: name.clone(), indices: todo.clone(), slice_width: w, height: h, cumulative_forecast: cumulative });
-                }
-                let (image, core_seconds, resumed) = render_strip(session, &strip, &opts.cache, &name, &todo, opts.cores, cancel.clone())?;
+        if session.is_some() {
+            if let Some(StripOutcome { image, core_seconds, resumed }) = strips[k].take() {
+                let todo = &to_render[k];
+                let (w, h) = (out.sky.width, out.sky.height);
                 out.columns_resumed += resumed;
                 sky_core_seconds += core_seconds;
                 // The strip's cost shared by the slices in proportion to their samples.
@@ -602,7 +646,6 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     out.rendered += 1;
                 }
                 let mut t = tracker.lock().unwrap();
-                t.job = None;
                 let p = t.progress(0, None);
                 t.emit(BakeEvent::Progress(p));
             }
@@ -645,14 +688,11 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
             let made: std::sync::OnceLock<Session> = std::sync::OnceLock::new();
             let render = |view: &View, index: usize| -> Result<Image, BakeError> {
-                let s = session.as_ref().unwrap_or_else(|| {
-                    made.get_or_init(|| Session::new(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, opts.workers.clone(), farm_options(opts, &tracker), &|| {}))
-                });
+                let s = session.as_ref().unwrap_or_else(|| made.get_or_init(|| Session::on_farm(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, farm.clone(), &|| {})));
                 // The slice is the bake's current job: its farm progress moves
                 // the bake's, through the slice's forecast.
                 let forecast = fog_forecasts[k][index];
-                tracker.lock().unwrap().job =
-                    Some(StripJob { sky: format!("{name} (fog)"), indices: vec![index], slice_width: view.width, height: view.height, cumulative_forecast: vec![0.0, forecast] });
+                tracker.lock().unwrap().job = Some(QueueJob::new(vec![(format!("{name} (fog)"), index, (view.width * view.height) as u64)], &[forecast]));
                 let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source })?;
                 let mut t = tracker.lock().unwrap();
                 t.job = None;
@@ -718,11 +758,31 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
     farm
 }
 
-/// Renders a strip of slices (or one slice) through the session, with a
-/// journal in the cache folder: a bake killed mid-strip resumes from the
-/// columns it had (the journal goes once the strip is done). Returns the
-/// image, its cost in core-seconds and the columns taken from a journal.
-fn render_strip(session: &Session, strip: &View, cache: &SliceCache, sky: &str, indices: &[usize], cores: usize, cancel: Arc<AtomicBool>) -> Result<(Image, f64, u32), BakeError> {
+/// A basis sky's strip in the bake's queue.
+struct QueuedStrip {
+    /// The sky's place in the bake, and its name.
+    k: usize,
+    sky: String,
+    slice_width: usize,
+    strip: View,
+    journal: std::path::PathBuf,
+    /// Columns taken from the journal of a bake that was stopped.
+    resumed: u32,
+}
+
+/// A basis sky's strip, rendered: the image, its share of the queue's
+/// cost in core-seconds, and the columns taken from a journal.
+struct StripOutcome {
+    image: Image,
+    core_seconds: f64,
+    resumed: u32,
+}
+
+/// A strip of slices as one job of the bake's queue, with its journal in
+/// the cache folder: a bake killed mid-strip resumes from the columns it
+/// had (the journal goes once the queue is done). Returns the part, the
+/// journal's path and the columns taken from it.
+fn journaled_part(session: &Session, strip: &View, cache: &SliceCache) -> Result<(FarmPart, std::path::PathBuf, u32), BakeError> {
     let job = session.job(strip);
     let path = cache.dir().join(format!("{}.journal", job.hash));
     let header = Header { job_hash: job.hash.clone(), width: strip.width as u32, height: strip.height as u32 };
@@ -732,18 +792,31 @@ fn render_strip(session: &Session, strip: &View, cache: &SliceCache, sky: &str, 
         _ => (Journal::create(&path, &header).map_err(BakeError::Journal)?, BTreeMap::new()),
     };
     let resumed_columns = resumed.len() as u32;
-    let start = Instant::now();
-    let error = |source| {
-        let (first, last) = (indices[0], *indices.last().expect("a strip has slices"));
-        if first == last {
-            BakeError::Render { sky: sky.to_string(), index: first, source }
-        } else {
-            BakeError::RenderSlices { sky: sky.to_string(), first, last, source }
+    Ok((FarmPart { job, resumed, journal: Some(journal) }, path, resumed_columns))
+}
+
+/// The bake's error for a failed queue: a column that failed names its
+/// basis sky and slice; anything else names the slices of the one sky
+/// queued, or every sky queued.
+fn queue_error(queued: &[QueuedStrip], to_render: &[Vec<usize>], source: FarmError) -> BakeError {
+    if let FarmError::ColumnFailed { part, column, .. } = &source {
+        if let Some(q) = queued.get(*part) {
+            let index = to_render[q.k][(*column as usize / q.slice_width.max(1)).min(to_render[q.k].len() - 1)];
+            return BakeError::Render { sky: q.sky.clone(), index, source };
         }
-    };
-    let rendered = session.render(job, resumed, Some(journal), cancel).map_err(error)?;
-    let _ = std::fs::remove_file(&path);
-    Ok((rendered.image, start.elapsed().as_secs_f64() * cores as f64, resumed_columns))
+    }
+    match queued {
+        [q] => {
+            let todo = &to_render[q.k];
+            let (first, last) = (todo[0], *todo.last().expect("a strip has slices"));
+            if first == last {
+                BakeError::Render { sky: q.sky.clone(), index: first, source }
+            } else {
+                BakeError::RenderSlices { sky: q.sky.clone(), first, last, source }
+            }
+        }
+        _ => BakeError::RenderQueue { skies: queued.iter().map(|q| q.sky.as_str()).collect::<Vec<_>>().join(", "), source },
+    }
 }
 
 /// Slice `index` of `sky`, the columns of `image` from `x0` on; a texel

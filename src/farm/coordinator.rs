@@ -21,8 +21,8 @@ pub use super::job::FarmJob;
 use super::journal::Journal;
 use super::proto;
 use super::protocol::TaskError;
-use super::scheduler::{Assign, Sched, Stop, WState};
-pub use super::scheduler::{FarmError, Outcome, Stats, Traffic, WorkerStats};
+use super::scheduler::{Assign, PartInit, Sched, Stop, WState};
+pub use super::scheduler::{FarmError, Outcome, PartsOutcome, Stats, Traffic, WorkerStats};
 use super::tile;
 use super::transport::Backend;
 pub use super::transport::{connect, Auth};
@@ -155,18 +155,34 @@ impl Farm {
     /// holds columns from a journal; `journal`, if any, receives every
     /// newly accepted column. `cancel` stops the render (the journal stays).
     pub async fn render(&mut self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: &Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
-        let s = &job.settings;
-        let (width, height) = (s.view.width as u32, s.view.height as u32);
-        let lines = s.spectral.spectral_nm.len() as u32;
-        let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
-        for (c, t) in &resumed {
-            let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
-            if let Ok(mut cols) = tile::decode(t, &want) {
-                if (*c as usize) < columns.len() {
-                    columns[*c as usize] = cols.pop();
+        let mut out = self.render_parts(vec![FarmPart { job, resumed, journal }], opts, cancel).await?;
+        Ok(Outcome { columns: out.parts.pop().expect("one part"), stats: out.stats })
+    }
+
+    /// Renders several jobs (each its own optics and view) in one queue of
+    /// columns, in their order: a worker done with the columns of one job
+    /// goes on to the next without waiting for the slowest column of the
+    /// first, and gets each job's optics only if it lacks them.
+    pub async fn render_parts(&mut self, parts: Vec<FarmPart>, opts: &Options, cancel: Arc<AtomicBool>) -> Result<PartsOutcome, FarmError> {
+        let jobs: Vec<Arc<FarmJob>> = parts.iter().map(|p| p.job.clone()).collect();
+        let inits = parts
+            .into_iter()
+            .map(|FarmPart { job, resumed, journal }| {
+                let s = &job.settings;
+                let (width, height) = (s.view.width as u32, s.view.height as u32);
+                let lines = s.spectral.spectral_nm.len() as u32;
+                let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
+                for (c, t) in &resumed {
+                    let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
+                    if let Ok(mut cols) = tile::decode(t, &want) {
+                        if (*c as usize) < columns.len() {
+                            columns[*c as usize] = cols.pop();
+                        }
+                    }
                 }
-            }
-        }
+                PartInit { job_hash: job.hash.clone(), height, lines, columns, journal }
+            })
+            .collect();
         // Backends made on first use; one that cannot be made quarantines its worker.
         for slot in &mut self.slots {
             if slot.backend.is_none() && slot.quarantined.is_none() {
@@ -177,14 +193,9 @@ impl Farm {
             }
         }
         let wstates = self.slots.iter().map(|slot| WState::new(slot.name.clone(), slot.spec.address(), slot.quarantined.clone())).collect();
-        let shared = Arc::new(Shared {
-            sched: Mutex::new(Sched::new(&job.hash, height, lines, columns, wstates, journal, opts.clone())),
-            changed: Notify::new(),
-            cancel: cancel.clone(),
-            epoch: Instant::now(),
-        });
+        let shared = Arc::new(Shared { sched: Mutex::new(Sched::new(inits, wstates, opts.clone())), changed: Notify::new(), cancel: cancel.clone(), epoch: Instant::now() });
         let leases = tokio::spawn(watch_leases(shared.clone(), opts.lease));
-        let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period, width as u64 * height as u64));
+        let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period));
         let mut drivers = Vec::new();
         for (w, slot) in self.slots.iter_mut().enumerate() {
             if slot.quarantined.is_some() {
@@ -192,8 +203,8 @@ impl Farm {
             }
             let Some(backend) = slot.backend.take() else { continue };
             let named = matches!(&slot.spec, WorkerSpec::Local { .. } | WorkerSpec::Remote { name: Some(_), .. });
-            let (shared, job, opts) = (shared.clone(), job.clone(), opts.clone());
-            drivers.push((w, tokio::spawn(async move { drive(w, backend, named, shared, job, opts).await })));
+            let (shared, jobs, opts) = (shared.clone(), jobs.clone(), opts.clone());
+            drivers.push((w, tokio::spawn(async move { drive(w, backend, named, shared, jobs, opts).await })));
         }
         for (w, d) in drivers {
             // A driver that panicked loses its backend: the next render makes a new one.
@@ -217,17 +228,26 @@ impl Farm {
             return Err(e);
         }
         let stats = sched.snapshot();
+        let busy_s = sched.busy_s();
         match sched.take_columns() {
-            Some(columns) => Ok(Outcome { columns, stats }),
+            Some(parts) => Ok(PartsOutcome { parts, busy_s, stats }),
             None => Err(FarmError::NoWorkers { report: sched.report() }),
         }
     }
 }
 
+/// One job of a render of several ([`Farm::render_parts`]), with the
+/// columns an earlier run journaled and the journal for new ones.
+pub struct FarmPart {
+    pub job: Arc<FarmJob>,
+    pub resumed: BTreeMap<u32, proto::Tile>,
+    pub journal: Option<Journal>,
+}
+
 /// One worker's loop: take a task, run it, report, until the job is done;
 /// gives the backend (its connection) back for the next render. `named`:
 /// the farm file names the worker (else it goes by its Hello's name).
-async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>, job: Arc<FarmJob>, opts: Options) -> Backend {
+async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>, jobs: Vec<Arc<FarmJob>>, opts: Options) -> Backend {
     let (inflight, preparing, traffic) = {
         let s = shared.sched.lock().unwrap();
         (s.workers[w].inflight_pixels.clone(), s.workers[w].preparing.clone(), s.workers[w].traffic.clone())
@@ -288,7 +308,7 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
             }
             Assign::Task(t) => {
                 let beat = || shared.sched.lock().unwrap().heard(w, t.id, shared.now());
-                let result = backend.run(&t, &job, (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel).await;
+                let result = backend.run(&t, &jobs[t.part], (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel).await;
                 preparing.store(false, Ordering::Relaxed);
                 {
                     let mut s = shared.sched.lock().unwrap();
@@ -309,7 +329,7 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
                                 _ => {}
                             }
                             s.release(w, t.id, matches!(e, TaskError::Cancelled));
-                            s.blame(w, e, render.then_some((t.first, t.count)));
+                            s.blame(w, e, render.then_some((t.start, t.count)));
                         }
                     }
                 }
@@ -347,16 +367,18 @@ async fn watch_leases(shared: Arc<Shared>, lease: Duration) {
 }
 
 /// Reports progress every `period` until aborted.
-async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: Duration, total_pixels: u64) {
+async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: Duration) {
     let Some(sink) = sink else { return };
     let started = Instant::now();
     let mut tick = tokio::time::interval(period);
     loop {
         tick.tick().await;
-        let (stats, pixels, height) = {
+        let (stats, pixels, total_pixels) = {
             let s = shared.sched.lock().unwrap();
-            (s.snapshot(), s.pixels_done(), s.height as f64)
+            (s.snapshot(), s.pixels_done(), s.pixels_total())
         };
+        // Columns of several jobs may differ in height: the mean one.
+        let height = total_pixels as f64 / stats.columns_total.max(1) as f64;
         // ETA from each worker's measured speed (columns per second).
         let speed: f64 = stats.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.columns_per_s).sum::<f64>() * height;
         let left = total_pixels.saturating_sub(pixels) as f64;

@@ -23,7 +23,7 @@ use super::coordinator::Options;
 use super::events::FarmEvent;
 use super::journal::Journal;
 use super::protocol::TaskError;
-pub use super::stats::{FarmError, Outcome, Stats, Traffic, WorkerStats};
+pub use super::stats::{FarmError, Outcome, PartsOutcome, Stats, Traffic, WorkerStats};
 use super::tile;
 use crate::render::PixelResult;
 use std::collections::{BTreeMap, BTreeSet, HashMap, VecDeque};
@@ -78,11 +78,16 @@ struct Task {
     runners: Vec<Runner>,
 }
 
-/// A task as one runner gets it.
+/// A task as one runner gets it: columns of one part (job) of the render.
 #[derive(Clone)]
 pub(crate) struct Assignment {
     pub id: u64,
+    /// The part whose columns these are, and the first of them in the
+    /// part's own numbering (what the worker renders).
+    pub part: usize,
     pub first: u32,
+    /// The first column in the render's numbering, over all its parts.
+    pub start: u32,
     pub count: u32,
     pub stop: watch::Receiver<Stop>,
 }
@@ -130,12 +135,36 @@ impl WState {
     }
 }
 
-/// One render's scheduling state.
+/// One job of a render as the scheduler starts it: its columns (those of
+/// an earlier run from a journal, the rest None) and where the accepted
+/// ones go.
+pub(crate) struct PartInit {
+    pub job_hash: String,
+    pub height: u32,
+    pub lines: u32,
+    pub columns: Vec<Option<Vec<PixelResult>>>,
+    pub journal: Option<Journal>,
+}
+
+/// One job of a render: its columns follow those of the parts before it
+/// in the render's numbering, from `offset` on.
+struct Part {
+    job_hash: String,
+    height: u32,
+    lines: u32,
+    offset: u32,
+    width: u32,
+    journal: Option<Journal>,
+    /// Seconds its winning tasks ran on their workers, in all.
+    busy_s: f64,
+}
+
+/// One render's scheduling state: the columns of one or more jobs (parts)
+/// in one queue, so that workers go from one job to the next without
+/// waiting for the slowest column of each. A task never spans two parts.
 pub(crate) struct Sched {
     width: u32,
-    pub height: u32,
-    lines: u32,
-    job_hash: String,
+    parts: Vec<Part>,
     columns: Vec<Option<Vec<PixelResult>>>,
     producer: Vec<Option<usize>>,
     pending: BTreeSet<u32>,
@@ -148,24 +177,30 @@ pub(crate) struct Sched {
     next_id: u64,
     /// Why the render failed, once it has.
     pub fatal: Option<FarmError>,
-    journal: Option<Journal>,
     pub stats: Stats,
     opts: Options,
 }
 
 impl Sched {
-    /// A render of `width` columns of `height` pixels with `lines`
-    /// spectral lines, named `job_hash`; `columns` holds those already
-    /// rendered (from a journal), `journal` receives the accepted ones.
-    pub fn new(job_hash: &str, height: u32, lines: u32, columns: Vec<Option<Vec<PixelResult>>>, workers: Vec<WState>, journal: Option<Journal>, opts: Options) -> Sched {
+    /// A render of `parts`, each its own job (columns of its height and
+    /// spectral lines, named by its hash), in one queue, in their order.
+    pub fn new(parts: Vec<PartInit>, workers: Vec<WState>, opts: Options) -> Sched {
+        let mut columns = Vec::new();
+        let parts: Vec<Part> = parts
+            .into_iter()
+            .map(|p| {
+                let offset = columns.len() as u32;
+                let width = p.columns.len() as u32;
+                columns.extend(p.columns);
+                Part { job_hash: p.job_hash, height: p.height, lines: p.lines, offset, width, journal: p.journal, busy_s: 0.0 }
+            })
+            .collect();
         let width = columns.len() as u32;
         let resumed = columns.iter().filter(|c| c.is_some()).count() as u32;
         let pending = (0..width).filter(|&c| columns[c as usize].is_none()).collect();
         let mut s = Sched {
             width,
-            height,
-            lines,
-            job_hash: job_hash.to_string(),
+            parts,
             columns,
             producer: vec![None; width as usize],
             pending,
@@ -177,7 +212,6 @@ impl Sched {
             workers,
             next_id: 1,
             fatal: None,
-            journal,
             stats: Stats { columns_total: width, columns_resumed: resumed, ..Default::default() },
             opts,
         };
@@ -185,6 +219,22 @@ impl Sched {
             s.fatal = Some(FarmError::NoWorkers { report: s.report() });
         }
         s
+    }
+
+    /// The part column `c` (in the render's numbering) belongs to.
+    fn part_of(&self, c: u32) -> usize {
+        self.parts.partition_point(|p| p.offset + p.width <= c)
+    }
+
+    /// Pixels in all: every part's columns times its height.
+    pub fn pixels_total(&self) -> u64 {
+        self.parts.iter().map(|p| p.width as u64 * p.height as u64).sum()
+    }
+
+    /// Seconds each part's winning tasks ran on their workers, in all (a
+    /// basis of sharing a render's cost among its parts).
+    pub fn busy_s(&self) -> Vec<f64> {
+        self.parts.iter().map(|p| p.busy_s).collect()
     }
 
     pub fn live_workers(&self) -> usize {
@@ -228,7 +278,12 @@ impl Sched {
         let (runner, stop) = self.runner(w, now);
         self.tasks.insert(id, Task { first, count, kind, runners: vec![runner] });
         self.stats.tasks += 1;
-        Assign::Task(Assignment { id, first, count, stop })
+        Assign::Task(self.assignment(id, first, count, stop))
+    }
+
+    fn assignment(&self, id: u64, start: u32, count: u32, stop: watch::Receiver<Stop>) -> Assignment {
+        let part = self.part_of(start);
+        Assignment { id, part, first: start - self.parts[part].offset, start, count, stop }
     }
 
     /// Work for worker `w` at `now`: a verification it may take, else a
@@ -271,7 +326,9 @@ impl Sched {
             return self.new_task(w, column, 1, Kind::Verify { check: id }, now);
         }
         if let Some(&start) = self.pending.iter().next() {
-            let n = self.batch(w);
+            // Not past the end of the part.
+            let end = self.parts[self.part_of(start)].offset + self.parts[self.part_of(start)].width;
+            let n = self.batch(w).min(end - start);
             let mut count = 0;
             while count < n && self.pending.contains(&(start + count)) {
                 self.pending.remove(&(start + count));
@@ -285,7 +342,8 @@ impl Sched {
             let (runner, stop) = self.runner(w, now);
             let t = self.tasks.get_mut(&id).unwrap();
             t.runners.push(runner);
-            let a = Assignment { id, first: t.first, count: t.count, stop };
+            let (first, count) = (t.first, t.count);
+            let a = self.assignment(id, first, count, stop);
             self.stats.duplicates += 1;
             return Assign::Task(a);
         }
@@ -296,7 +354,8 @@ impl Sched {
         if self.opts.verify_fraction <= 0.0 {
             return false;
         }
-        let h = blake3::hash(format!("{}:{column}", self.job_hash).as_bytes());
+        let p = &self.parts[self.part_of(column)];
+        let h = blake3::hash(format!("{}:{}", p.job_hash, column - p.offset).as_bytes());
         let u = u64::from_le_bytes(h.as_bytes()[..8].try_into().unwrap()) as f64 / u64::MAX as f64;
         u < self.opts.verify_fraction
     }
@@ -366,13 +425,16 @@ impl Sched {
         });
         match task.kind {
             Kind::Render => {
+                let k = self.part_of(task.first);
+                self.parts[k].busy_s += now.saturating_sub(started).as_secs_f64();
                 let mut accepted = Vec::new();
                 for (i, col) in columns.into_iter().enumerate() {
                     let c = task.first + i as u32;
                     if self.columns[c as usize].is_some() {
                         continue;
                     }
-                    accepted.push(tile::encode(&self.job_hash, 0, c, self.height, self.lines as usize, std::slice::from_ref(&col)));
+                    let p = &self.parts[k];
+                    accepted.push(tile::encode(&p.job_hash, 0, c - p.offset, p.height, p.lines as usize, std::slice::from_ref(&col)));
                     self.stats.samples_rendered += col.iter().map(|p| p.samples as u64).sum::<u64>();
                     self.columns[c as usize] = Some(col);
                     self.producer[c as usize] = Some(w);
@@ -381,7 +443,7 @@ impl Sched {
                         self.add_check(Check { column: c, producer: w, excluded: vec![w], disputed: None }, false);
                     }
                 }
-                if let Some(j) = &mut self.journal {
+                if let Some(j) = &mut self.parts[k].journal {
                     if let Err(e) = j.append_columns(&accepted) {
                         self.fatal = Some(e.into());
                     }
@@ -451,8 +513,10 @@ impl Sched {
             self.producer[i as usize] = None;
             self.pending.insert(i);
             self.stats.columns_rendered -= 1;
-            if let Some(j) = &mut self.journal {
-                if let Err(e) = j.retract(i) {
+            let k = self.part_of(i);
+            let local = i - self.parts[k].offset;
+            if let Some(j) = &mut self.parts[k].journal {
+                if let Err(e) = j.retract(local) {
                     self.fatal = Some(e.into());
                 }
             }
@@ -510,12 +574,13 @@ impl Sched {
         }
         self.workers[w].failures += 1;
         if let Some((first, count)) = columns {
-            for c in first..first + count {
+            let parts: Vec<(usize, u32)> = (first..first + count).map(|c| (self.part_of(c), c)).collect();
+            for (part, c) in parts {
                 let f = self.column_failures.entry(c).or_default();
                 f.insert(w, msg.clone());
                 if f.len() >= self.opts.max_column_failures && self.fatal.is_none() {
                     let report = f.iter().map(|(&i, m)| format!("  {}: {m}\n", self.workers[i].name)).collect::<String>();
-                    self.fatal = Some(FarmError::ColumnFailed { column: c, workers: f.len(), report });
+                    self.fatal = Some(FarmError::ColumnFailed { part, column: c - self.parts[part].offset, workers: f.len(), report });
                 }
             }
         }
@@ -554,7 +619,7 @@ impl Sched {
 
     /// Pixels finished: those of accepted columns and of running tasks.
     pub fn pixels_done(&self) -> u64 {
-        let done = self.columns.iter().filter(|c| c.is_some()).count() as u64 * self.height as u64;
+        let done: u64 = self.columns.iter().zip(0..).filter(|(c, _)| c.is_some()).map(|(_, i)| self.parts[self.part_of(i)].height as u64).sum();
         let running: u64 =
             self.tasks.values().filter(|t| t.kind == Kind::Render).map(|t| t.runners.iter().map(|r| self.workers[r.worker].inflight_pixels.load(Ordering::Relaxed)).max().unwrap_or(0)).sum();
         done + running
@@ -567,12 +632,13 @@ impl Sched {
         self.stats.columns_resumed + self.stats.columns_rendered
     }
 
-    /// The columns of a complete render, each top to bottom.
-    pub fn take_columns(&mut self) -> Option<Vec<Vec<PixelResult>>> {
+    /// The columns of a complete render, each top to bottom, by part.
+    pub fn take_columns(&mut self) -> Option<Vec<Vec<Vec<PixelResult>>>> {
         if !self.complete() {
             return None;
         }
-        Some(std::mem::take(&mut self.columns).into_iter().map(|c| c.expect("complete")).collect())
+        let mut all = std::mem::take(&mut self.columns).into_iter().map(|c| c.expect("complete"));
+        Some(self.parts.iter().map(|p| all.by_ref().take(p.width as usize).collect()).collect())
     }
 }
 

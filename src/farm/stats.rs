@@ -8,8 +8,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 pub enum FarmError {
     #[error("render cancelled")]
     Cancelled,
+    /// `column` of the render's part (job) `part`, in the part's numbering.
     #[error("column {column} failed on {workers} different workers, so the render stops:\n{report}")]
-    ColumnFailed { column: u32, workers: usize, report: String },
+    ColumnFailed { part: usize, column: u32, workers: usize, report: String },
     #[error("no worker left to render on:\n{report}")]
     NoWorkers { report: String },
     #[error("journal: {0}")]
@@ -64,6 +65,16 @@ pub struct Stats {
 /// The gathered columns (each top to bottom) and the figures.
 pub struct Outcome {
     pub columns: Vec<Vec<PixelResult>>,
+    pub stats: Stats,
+}
+
+/// The gathered columns of a render of several jobs (parts), by part, and
+/// the figures of the whole.
+pub struct PartsOutcome {
+    pub parts: Vec<Vec<Vec<PixelResult>>>,
+    /// Seconds each part's accepted tasks ran on their workers, in all:
+    /// what its share of the render's cost is measured by.
+    pub busy_s: Vec<f64>,
     pub stats: Stats,
 }
 

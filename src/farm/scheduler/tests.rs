@@ -21,9 +21,13 @@ fn honest(a: &Assignment) -> Vec<Vec<PixelResult>> {
     cols(a.first, a.count, 0.0)
 }
 
+fn part(hash: &str, columns: Vec<Option<Vec<PixelResult>>>) -> PartInit {
+    PartInit { job_hash: hash.into(), height: HEIGHT, lines: 0, columns, journal: None }
+}
+
 fn sched_with(columns: Vec<Option<Vec<PixelResult>>>, workers: usize, opts: Options) -> Sched {
     let ws = (0..workers).map(|i| WState::new(format!("w{i}"), format!("h:{i}"), None)).collect();
-    Sched::new("job", HEIGHT, 0, columns, ws, None, opts)
+    Sched::new(vec![part("job", columns)], ws, opts)
 }
 
 fn sched(width: usize, workers: usize, opts: Options) -> Sched {
@@ -259,7 +263,7 @@ fn a_failing_worker_is_blamed_then_quarantined_and_a_column_failing_everywhere_s
     s.release(1, b.id, false);
     s.blame(1, TaskError::Failed("bang".into()), Some((b.first, b.count)));
     match &s.fatal {
-        Some(FarmError::ColumnFailed { column: 0, workers: 2, report }) => assert!(report.contains("w0: boom 2") && report.contains("w1: bang"), "{report}"),
+        Some(FarmError::ColumnFailed { part: 0, column: 0, workers: 2, report }) => assert!(report.contains("w0: boom 2") && report.contains("w1: bang"), "{report}"),
         other => panic!("{other:?}"),
     }
     assert!(is_done(&s.assign(2, t(5.0))));
@@ -280,7 +284,7 @@ fn refusals_quarantine_at_once_and_a_render_with_no_worker_left_fails() {
     }
     // Quarantined from the start (an earlier view): the render fails at once.
     let ws = vec![WState::new("w0".into(), "h:0".into(), Some("lied".into()))];
-    let s = Sched::new("job", HEIGHT, 0, vec![None; 2], ws, None, Options::default());
+    let s = Sched::new(vec![part("job", vec![None; 2])], ws, Options::default());
     assert!(matches!(s.fatal, Some(FarmError::NoWorkers { .. })));
 }
 
@@ -306,6 +310,71 @@ fn a_render_completes_with_every_column_once_and_resumed_columns_are_not_rendere
     assert_eq!((st.columns_total, st.columns_resumed, st.columns_rendered, st.tasks), (4, 2, 2, 2));
     assert_eq!(st.samples_rendered, 2 * HEIGHT as u64 * 4);
     assert_eq!((st.workers[0].tasks_done, st.workers[0].columns_done), (2, 2));
-    let got: Vec<f64> = s.take_columns().unwrap().iter().map(|c| c[0].xyz[0]).collect();
+    let got: Vec<f64> = s.take_columns().unwrap()[0].iter().map(|c| c[0].xyz[0]).collect();
     assert_eq!(got, vec![0.0, 1.0, 2.0, 3.0]);
+}
+
+/// Several jobs in one queue: a worker finishing the columns of one goes
+/// on to the next at once (no waiting for the first job's last column),
+/// no task spans two jobs, each task names its job and the job's own
+/// column numbers, and the columns come back by job.
+#[test]
+fn parts_share_one_queue_and_no_task_spans_two() {
+    let ws = (0..2).map(|i| WState::new(format!("w{i}"), format!("h:{i}"), None)).collect();
+    let opts = Options { max_batch: 3, ..Options::default() };
+    let mut s = Sched::new(vec![part("a", vec![None; 5]), part("b", vec![None; 4])], ws, opts);
+    assert_eq!(s.pixels_total(), 9 * HEIGHT as u64);
+    let mut seen = Vec::new();
+    let mut clock = 0.0;
+    // Worker 0 takes a slow task at the start of job a and holds it; worker
+    // 1 renders everything else, crossing into job b while it runs.
+    let held = task(s.assign(0, t(0.0)));
+    assert_eq!((held.part, held.first, held.start, held.count), (0, 0, 0, 1));
+    loop {
+        clock += 1.0;
+        let a = match s.assign(1, t(clock)) {
+            Assign::Task(a) => a,
+            _ => break,
+        };
+        if a.id == held.id {
+            // Nothing new left: a duplicate of the held task.
+            break;
+        }
+        let p = &s.parts[a.part];
+        assert!(a.start >= p.offset && a.start + a.count <= p.offset + p.width, "a task spans two parts: {} + {}", a.start, a.count);
+        assert_eq!(a.start - p.offset, a.first);
+        seen.push((a.part, a.first, a.count));
+        let c = cols(a.start, a.count, 0.0);
+        s.finish(1, a.id, c, t(clock + 0.5));
+    }
+    // Job b was reached and finished while job a's first column was still out.
+    assert!(seen.iter().any(|&(p, _, _)| p == 1), "{seen:?}");
+    assert_eq!(seen.iter().filter(|&&(p, _, _)| p == 1).map(|&(_, _, n)| n).sum::<u32>(), 4, "{seen:?}");
+    s.finish(0, held.id, cols(0, 1, 0.0), t(clock + 1.0));
+    assert!(s.complete());
+    let busy = s.busy_s();
+    assert!(busy[0] > busy[1] && busy[1] > 0.0, "{busy:?}");
+    let parts = s.take_columns().unwrap();
+    assert_eq!(parts.iter().map(Vec::len).collect::<Vec<_>>(), vec![5, 4]);
+    // Job b's columns are its own 0..4: the render's columns 5..9.
+    assert_eq!(parts[1][0][0].xyz[0], 5.0);
+}
+
+/// A column that fails on enough workers is named by its job and its
+/// column there.
+#[test]
+fn a_failed_column_is_named_in_its_part() {
+    let ws = (0..2).map(|i| WState::new(format!("w{i}"), format!("h:{i}"), None)).collect();
+    let opts = Options { max_column_failures: 2, ..Options::default() };
+    let mut s = Sched::new(vec![part("a", vec![Some(vec![px(0.0); HEIGHT as usize]); 3]), part("b", vec![None; 2])], ws, opts);
+    for w in 0..2 {
+        let a = task(s.assign(w, t(0.0)));
+        assert_eq!((a.part, a.first), (1, 0));
+        s.release(w, a.id, false);
+        s.blame(w, TaskError::Failed("boom".into()), Some((a.start, 1)));
+    }
+    match &s.fatal {
+        Some(FarmError::ColumnFailed { part: 1, column: 0, workers: 2, .. }) => {}
+        other => panic!("{other:?}"),
+    }
 }
