@@ -183,14 +183,14 @@ pub struct FogJob<'a> {
 }
 
 /// Renders (or finds in `cache`) the fog LUTs of one basis sky: each slice
-/// not in the cache by `render(view, slice index)` (the bake's session:
-/// the embedded worker or the farm); `on_slice(done, total)` after each
-/// slice. A slice's cost is its render's wall time on the bake's cores.
+/// not in the cache by `render(view, slice index)`, which returns the image
+/// and its cost in core-seconds (the bake renders them in its queue,
+/// before); `on_slice(done, total)` after each slice.
 pub fn bake_fog(
     job: &FogJob,
     cache: &SliceCache,
     cancel: &AtomicBool,
-    render: &dyn Fn(&View, usize) -> Result<crate::render::Image, BakeError>,
+    render: &dyn Fn(&View, usize) -> Result<(crate::render::Image, f64), BakeError>,
     on_slice: &dyn Fn(usize, usize),
 ) -> Result<SkyFog, BakeError> {
     let (sky, atm, scene) = (job.sky, job.atmosphere, job.scene);
@@ -199,7 +199,6 @@ pub fn bake_fog(
     let geometry = FogGeometry { planet_radius_km: radius_km, observer_altitude_km: sky.altitude_m / 1000.0, ceiling_km: job.settings.ceiling_km };
     let mut fog = SkyFog { settings: job.settings, geometry, lit: Vec::new(), shadowed: Vec::new(), extras: extras(job, geometry, cache, cancel)?, rendered: 0, cached: 0, core_seconds: 0.0 };
     let total = sky.slices;
-    let threads = rayon::current_num_threads() as f64;
     for index in 0..sky.slices {
         if cancel.load(Ordering::SeqCst) {
             return Err(BakeError::Cancelled);
@@ -213,9 +212,8 @@ pub fn bake_fog(
                 s
             }
             None => {
-                let start = Instant::now();
-                let image = render(&view, index)?;
-                let slice = slice_of_image(&image, &view, &format!("{} (shadowed fog)", sky.name), index, start.elapsed().as_secs_f64() * threads)?;
+                let (image, core_seconds) = render(&view, index)?;
+                let slice = slice_of_image(&image, &view, &format!("{} (shadowed fog)", sky.name), index, core_seconds)?;
                 cache.put(&key, &slice)?;
                 fog.rendered += 1;
                 fog.core_seconds += slice.core_seconds;

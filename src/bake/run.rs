@@ -5,14 +5,15 @@
 //! it is not.
 //!
 //! The slices a basis sky has to render make one farm job, a strip of
-//! slices side by side ([`Camera::LutStrip`]), and the strips of every
-//! basis sky go to one farm (its workers greeted once, each sky's optics
-//! sent to each worker once) as one queue of columns
-//! ([`SharedFarm::render_parts`]): workers go from slice to slice and from
-//! sky to sky and wait only at the end of the bake's rendering, not at the
-//! end of every slice or sky. Each strip's columns are journaled in the
-//! cache folder, so a bake killed anywhere resumes from the columns it
-//! had; the slices go into the cache once the queue is done.
+//! slices side by side ([`Camera::LutStrip`]), followed by its fog slices
+//! (the Shadowed Fog's renders, a job each), and the jobs of every basis
+//! sky go to one farm (its workers greeted once, each sky's optics sent to
+//! each worker once) as one queue of columns ([`SharedFarm::render_parts`]):
+//! workers go from slice to slice and from sky to sky and wait only at the
+//! end of the bake's rendering, not at the end of every slice or sky. Each
+//! job's columns are journaled in the cache folder, so a bake killed
+//! anywhere resumes from the columns it had; the slices go into the cache
+//! once the queue is done.
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BakeFile, BasisSky, Quality, Sampling};
@@ -567,42 +568,59 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     // is one farm job, and a worker done with one sky's columns goes on to
     // the next sky's without waiting for the slowest column of the first.
     let to_render: Vec<Vec<usize>> = plan.iter().map(|p| (0..p.views.len()).filter(|&i| p.views[i].is_some() && p.same_as[i].is_none()).collect()).collect();
+    // The fog slices to render follow their sky's strip, a job each.
     let mut strips: Vec<Option<StripOutcome>> = (0..plan.len()).map(|_| None).collect();
+    let mut fog_rendered: Vec<Mutex<BTreeMap<String, (Image, f64)>>> = (0..plan.len()).map(|_| Mutex::default()).collect();
     let mut queued: Vec<QueuedStrip> = Vec::new();
     let mut parts = Vec::new();
     for (k, p) in plan.iter().enumerate() {
-        let (Some(session), false) = (&sessions[k], to_render[k].is_empty()) else { continue };
-        let slice_views: Vec<&View> = to_render[k].iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
-        let strip = strip_view(&slice_views);
-        let (part, journal, resumed) = journaled_part(session, &strip, &opts.cache)?;
-        parts.push(part);
-        queued.push(QueuedStrip { k, sky: p.out.sky.name.clone(), slice_width: slice_views[0].width, strip, journal, resumed });
+        let Some(session) = &sessions[k] else { continue };
+        let sky = p.out.sky.name.clone();
+        if !to_render[k].is_empty() {
+            let slice_views: Vec<&View> = to_render[k].iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
+            let strip = strip_view(&slice_views);
+            let (part, journal, resumed) = journaled_part(session, &strip, &opts.cache)?;
+            parts.push(part);
+            let slices = to_render[k].iter().map(|&i| (i, forecasts[k][i])).collect();
+            queued.push(QueuedStrip { k, sky: sky.clone(), fog: None, slices, slice_width: slice_views[0].width, view: strip, journal, resumed });
+        }
+        for f in &fog_plan[k] {
+            let (part, journal, resumed) = journaled_part(session, &f.view, &opts.cache)?;
+            parts.push(part);
+            let slices = vec![(f.index, fog_forecasts[k][f.index])];
+            queued.push(QueuedStrip { k, sky: format!("{sky} (fog)"), fog: Some(f.key.clone()), slices, slice_width: f.view.width, view: f.view.clone(), journal, resumed });
+        }
     }
     if !parts.is_empty() {
         if cancel.load(Ordering::SeqCst) {
             return Err(BakeError::Cancelled);
         }
         {
-            let slices: Vec<(String, usize, u64)> = queued.iter().flat_map(|q| to_render[q.k].iter().map(|&i| (q.sky.clone(), i, (q.slice_width * q.strip.height) as u64))).collect();
-            let slice_forecasts: Vec<f64> = queued.iter().flat_map(|q| to_render[q.k].iter().map(|&i| forecasts[q.k][i])).collect();
+            let slices: Vec<(String, usize, u64)> = queued.iter().flat_map(|q| q.slices.iter().map(|&(i, _)| (q.sky.clone(), i, (q.slice_width * q.view.height) as u64))).collect();
+            let slice_forecasts: Vec<f64> = queued.iter().flat_map(|q| q.slices.iter().map(|s| s.1)).collect();
             let mut t = tracker.lock().unwrap();
             t.current = (slices[0].0.clone(), slices[0].1);
             t.job = Some(QueueJob::new(slices, &slice_forecasts));
         }
         let start = Instant::now();
-        let outcome = farm.render_parts(parts, cancel.clone()).map_err(|source| queue_error(&queued, &to_render, source))?;
+        let outcome = farm.render_parts(parts, cancel.clone()).map_err(|source| queue_error(&queued, source))?;
         let core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
         for q in &queued {
             let _ = std::fs::remove_file(&q.journal);
         }
-        // The render's cost shared by the skies in proportion to the time
+        // The render's cost shared by the jobs in proportion to the time
         // their tasks took on the workers (a cloudy column costs several
         // clear ones).
         let busy_total: f64 = outcome.busy_s.iter().sum();
         for ((q, columns), busy_s) in queued.iter().zip(&outcome.parts).zip(&outcome.busy_s) {
-            let image = crate::session::image_of_columns(columns, q.strip.width, q.strip.height);
-            let share = if busy_total > 0.0 { busy_s / busy_total } else { 0.0 };
-            strips[q.k] = Some(StripOutcome { image, core_seconds: core_seconds * share, resumed: q.resumed });
+            let image = crate::session::image_of_columns(columns, q.view.width, q.view.height);
+            let cost = if busy_total > 0.0 { core_seconds * busy_s / busy_total } else { 0.0 };
+            match &q.fog {
+                None => strips[q.k] = Some(StripOutcome { image, core_seconds: cost, resumed: q.resumed }),
+                Some(key) => {
+                    fog_rendered[q.k].get_mut().unwrap().insert(key.clone(), (image, cost));
+                }
+            }
         }
         tracker.lock().unwrap().job = None;
     }
@@ -687,28 +705,33 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let job = super::fog::FogJob { sky: &out.sky, atmosphere: &atms[k], scene: &scene, sampling: &out.sampling, settings: bake.fog, quality: opts.quality };
             let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
             let made: std::sync::OnceLock<Session> = std::sync::OnceLock::new();
-            let render = |view: &View, index: usize| -> Result<Image, BakeError> {
-                let s = session.as_ref().unwrap_or_else(|| made.get_or_init(|| Session::on_farm(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, farm.clone(), &|| {})));
-                // The slice is the bake's current job: its farm progress moves
-                // the bake's, through the slice's forecast.
-                let forecast = fog_forecasts[k][index];
-                tracker.lock().unwrap().job = Some(QueueJob::new(vec![(format!("{name} (fog)"), index, (view.width * view.height) as u64)], &[forecast]));
-                let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source })?;
+            // The slice as the queue rendered it (a second slice of the
+            // same view, with the cache off, gets the image at no cost), or
+            // rendered now (none should be left).
+            let render = |view: &View, index: usize| -> Result<(Image, f64), BakeError> {
+                let key = slice_key(&out.atmosphere_hash, &out.spectral, view, opts.quality.name());
+                let queued = fog_rendered[k].lock().unwrap().get_mut(&key).map(|(image, cost)| (image.clone(), std::mem::take(cost)));
+                let (image, cost) = match queued {
+                    Some(r) => r,
+                    None => {
+                        let s = session.as_ref().unwrap_or_else(|| made.get_or_init(|| Session::on_farm(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, farm.clone(), &|| {})));
+                        let start = Instant::now();
+                        let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source })?;
+                        (r.image, start.elapsed().as_secs_f64() * opts.cores as f64)
+                    }
+                };
                 let mut t = tracker.lock().unwrap();
-                t.job = None;
                 t.texels_before += (view.width * view.height) as u64;
                 t.slices_done += 1;
-                t.forecast_done += forecast;
+                t.forecast_done += fog_forecasts[k][index];
                 let p = t.progress(0, None);
                 t.emit(BakeEvent::Progress(p));
-                Ok(r.image)
+                Ok((image, cost))
             };
             if opts.only.is_some() {
-                let threads = rayon::current_num_threads() as f64;
                 for (j, f) in fog_plan[k].iter().enumerate() {
-                    let start = Instant::now();
-                    let image = render(&f.view, f.index)?;
-                    let slice = slice_of_image(&image, &f.view, &format!("{name} (shadowed fog)"), f.index, start.elapsed().as_secs_f64() * threads)?;
+                    let (image, cost) = render(&f.view, f.index)?;
+                    let slice = slice_of_image(&image, &f.view, &format!("{name} (shadowed fog)"), f.index, cost)?;
                     opts.cache.put(&f.key, &slice)?;
                     on_slice(j + 1, fog_plan[k].len());
                 }
@@ -758,13 +781,18 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
     farm
 }
 
-/// A basis sky's strip in the bake's queue.
+/// A job in the bake's queue: a basis sky's strip of slices, or one of its
+/// fog slices.
 struct QueuedStrip {
-    /// The sky's place in the bake, and its name.
+    /// The sky's place in the bake, and its name ("NAME (fog)" for fog).
     k: usize,
     sky: String,
+    /// A fog slice's cache key (None: the sky's strip).
+    fog: Option<String>,
+    /// The slices, by index, with their forecast core-seconds.
+    slices: Vec<(usize, f64)>,
     slice_width: usize,
-    strip: View,
+    view: View,
     journal: std::path::PathBuf,
     /// Columns taken from the journal of a bake that was stopped.
     resumed: u32,
@@ -778,7 +806,7 @@ struct StripOutcome {
     resumed: u32,
 }
 
-/// A strip of slices as one job of the bake's queue, with its journal in
+/// A strip of slices (or a fog slice) as one job of the bake's queue, with its journal in
 /// the cache folder: a bake killed mid-strip resumes from the columns it
 /// had (the journal goes once the queue is done). Returns the part, the
 /// journal's path and the columns taken from it.
@@ -796,26 +824,29 @@ fn journaled_part(session: &Session, strip: &View, cache: &SliceCache) -> Result
 }
 
 /// The bake's error for a failed queue: a column that failed names its
-/// basis sky and slice; anything else names the slices of the one sky
+/// basis sky and slice; anything else names the slices of the one job
 /// queued, or every sky queued.
-fn queue_error(queued: &[QueuedStrip], to_render: &[Vec<usize>], source: FarmError) -> BakeError {
+fn queue_error(queued: &[QueuedStrip], source: FarmError) -> BakeError {
     if let FarmError::ColumnFailed { part, column, .. } = &source {
         if let Some(q) = queued.get(*part) {
-            let index = to_render[q.k][(*column as usize / q.slice_width.max(1)).min(to_render[q.k].len() - 1)];
+            let index = q.slices[(*column as usize / q.slice_width.max(1)).min(q.slices.len() - 1)].0;
             return BakeError::Render { sky: q.sky.clone(), index, source };
         }
     }
     match queued {
         [q] => {
-            let todo = &to_render[q.k];
-            let (first, last) = (todo[0], *todo.last().expect("a strip has slices"));
+            let (first, last) = (q.slices[0].0, q.slices.last().expect("a job has slices").0);
             if first == last {
                 BakeError::Render { sky: q.sky.clone(), index: first, source }
             } else {
                 BakeError::RenderSlices { sky: q.sky.clone(), first, last, source }
             }
         }
-        _ => BakeError::RenderQueue { skies: queued.iter().map(|q| q.sky.as_str()).collect::<Vec<_>>().join(", "), source },
+        _ => {
+            let mut skies: Vec<&str> = queued.iter().map(|q| q.sky.as_str()).collect();
+            skies.dedup();
+            BakeError::RenderQueue { skies: skies.join(", "), source }
+        }
     }
 }
 
