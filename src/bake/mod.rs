@@ -121,6 +121,8 @@ pub enum BakeError {
     Write(String),
     #[error("--pack-only: the cache {} lacks {} of the bake's slices ({}{}); render them first (--slice NAME:INDEX or NAME:fog:INDEX, or a bake without --pack-only)", cache.display(), missing.len(), missing.iter().take(8).cloned().collect::<Vec<_>>().join(", "), if missing.len() > 8 { ", ..." } else { "" })]
     NotInCache { cache: std::path::PathBuf, missing: Vec<String> },
+    #[error("fog slice {sky}:fog:{index} was neither rendered in this bake nor found in the cache {}: did something clear the cache during the bake? Run the bake again", cache.display())]
+    FogSliceLost { sky: String, index: usize, cache: std::path::PathBuf },
     #[error("bake cancelled")]
     Cancelled,
 }

@@ -571,7 +571,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     // The fog slices to render follow their sky's strip, a job each.
     let mut strips: Vec<Option<StripOutcome>> = (0..plan.len()).map(|_| None).collect();
     let mut fog_rendered: Vec<Mutex<BTreeMap<String, (Image, f64)>>> = (0..plan.len()).map(|_| Mutex::default()).collect();
-    let mut queued: Vec<QueuedStrip> = Vec::new();
+    let mut queued: Vec<QueuedJob> = Vec::new();
     let mut parts = Vec::new();
     for (k, p) in plan.iter().enumerate() {
         let Some(session) = &sessions[k] else { continue };
@@ -582,13 +582,13 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let (part, journal, resumed) = journaled_part(session, &strip, &opts.cache)?;
             parts.push(part);
             let slices = to_render[k].iter().map(|&i| (i, forecasts[k][i])).collect();
-            queued.push(QueuedStrip { k, sky: sky.clone(), fog: None, slices, slice_width: slice_views[0].width, view: strip, journal, resumed });
+            queued.push(QueuedJob { k, sky: sky.clone(), fog: None, slices, slice_width: slice_views[0].width, view: strip, journal, resumed });
         }
         for f in &fog_plan[k] {
             let (part, journal, resumed) = journaled_part(session, &f.view, &opts.cache)?;
             parts.push(part);
             let slices = vec![(f.index, fog_forecasts[k][f.index])];
-            queued.push(QueuedStrip { k, sky: format!("{sky} (fog)"), fog: Some(f.key.clone()), slices, slice_width: f.view.width, view: f.view.clone(), journal, resumed });
+            queued.push(QueuedJob { k, sky: format!("{sky} (fog)"), fog: Some(f.key.clone()), slices, slice_width: f.view.width, view: f.view.clone(), journal, resumed });
         }
     }
     if !parts.is_empty() {
@@ -626,7 +626,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     }
     let mut done = Vec::new();
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
-    for (k, (Planned { mut out, views, same_as, bundle, .. }, session)) in plan.into_iter().zip(sessions).enumerate() {
+    drop(sessions);
+    for (k, Planned { mut out, views, same_as, .. }) in plan.into_iter().enumerate() {
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
             if let Some(s) = s {
@@ -641,46 +642,44 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             }
         }
         let mut sky_core_seconds = 0.0;
-        if session.is_some() {
-            if let Some(StripOutcome { image, core_seconds, resumed }) = strips[k].take() {
-                let todo = &to_render[k];
-                let (w, h) = (out.sky.width, out.sky.height);
-                out.columns_resumed += resumed;
-                sky_core_seconds += core_seconds;
-                // The strip's cost shared by the slices in proportion to their samples.
-                let samples: Vec<u64> = (0..todo.len()).map(|j| (0..h).flat_map(|y| &image.pixels[y * image.width + j * w..y * image.width + (j + 1) * w]).map(|p| p.samples as u64).sum()).collect();
-                let all_samples = samples.iter().sum::<u64>().max(1) as f64;
-                for (j, &index) in todo.iter().enumerate() {
-                    let (view, key) = views[index].as_ref().expect("to render");
-                    let slice = slice_of_strip(&image, j * w, view, &name, index, core_seconds * samples[j] as f64 / all_samples)?;
-                    opts.cache.put(key, &slice)?;
-                    let mut t = tracker.lock().unwrap();
-                    t.texels_before += (w * h) as u64;
-                    t.slices_done += 1;
-                    t.forecast_done += forecasts[k][index];
-                    t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
-                    drop(t);
-                    out.slices[index] = Some(slice);
-                    out.rendered += 1;
-                }
+        if let Some(StripOutcome { image, core_seconds, resumed }) = strips[k].take() {
+            let todo = &to_render[k];
+            let (w, h) = (out.sky.width, out.sky.height);
+            out.columns_resumed += resumed;
+            sky_core_seconds += core_seconds;
+            // The strip's cost shared by the slices in proportion to their samples.
+            let samples: Vec<u64> = (0..todo.len()).map(|j| (0..h).flat_map(|y| &image.pixels[y * image.width + j * w..y * image.width + (j + 1) * w]).map(|p| p.samples as u64).sum()).collect();
+            let all_samples = samples.iter().sum::<u64>().max(1) as f64;
+            for (j, &index) in todo.iter().enumerate() {
+                let (view, key) = views[index].as_ref().expect("to render");
+                let slice = slice_of_strip(&image, j * w, view, &name, index, core_seconds * samples[j] as f64 / all_samples)?;
+                opts.cache.put(key, &slice)?;
                 let mut t = tracker.lock().unwrap();
-                let p = t.progress(0, None);
-                t.emit(BakeEvent::Progress(p));
-            }
-            // The same view as an earlier slice: rendered once.
-            for (index, first) in same_as.iter().enumerate() {
-                let Some(first) = *first else { continue };
-                let slice = out.slices[first].clone();
-                let mut t = tracker.lock().unwrap();
-                t.texels_before += (out.sky.width * out.sky.height) as u64;
+                t.texels_before += (w * h) as u64;
                 t.slices_done += 1;
-                if let Some(s) = &slice {
-                    t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
-                }
+                t.forecast_done += forecasts[k][index];
+                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
                 drop(t);
-                out.slices[index] = slice;
-                out.cached += 1;
+                out.slices[index] = Some(slice);
+                out.rendered += 1;
             }
+            let mut t = tracker.lock().unwrap();
+            let p = t.progress(0, None);
+            t.emit(BakeEvent::Progress(p));
+        }
+        // The same view as an earlier slice: rendered once.
+        for (index, first) in same_as.iter().enumerate() {
+            let Some(first) = *first else { continue };
+            let slice = out.slices[first].clone();
+            let mut t = tracker.lock().unwrap();
+            t.texels_before += (out.sky.width * out.sky.height) as u64;
+            t.slices_done += 1;
+            if let Some(s) = &slice {
+                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
+            }
+            drop(t);
+            out.slices[index] = slice;
+            out.cached += 1;
         }
         if opts.only.is_none() {
             // The sun's transmittance and sunlight, from the cache or from
@@ -698,28 +697,20 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             };
         }
         if opts.only.is_none() || !fog_plan[k].is_empty() {
-            // The global-fog LUTs, through the sky's session (the same
-            // workers; one made now if every sky slice was cached): a whole
-            // bake's, or the fog slices `only` names, into the cache.
+            // The global-fog LUTs from their slices rendered in the queue
+            // (or cached): a whole bake's, or the fog slices `only` names,
+            // into the cache.
             let scene = optics.get(&atms[k], &out.spectral, mie, &|| {});
             let job = super::fog::FogJob { sky: &out.sky, atmosphere: &atms[k], scene: &scene, sampling: &out.sampling, settings: bake.fog, quality: opts.quality };
             let on_slice = |done: usize, total: usize| tracker.lock().unwrap().emit(BakeEvent::FogSlice { sky: name.clone(), done, total });
-            let made: std::sync::OnceLock<Session> = std::sync::OnceLock::new();
-            // The slice as the queue rendered it (a second slice of the
-            // same view, with the cache off, gets the image at no cost), or
-            // rendered now (none should be left).
+            // The slice as the queue rendered it (every fog slice not in the
+            // cache was queued; a second slice of the same view, with the
+            // cache off, gets the image at no cost). One that is neither
+            // left the cache during the bake: an error.
             let render = |view: &View, index: usize| -> Result<(Image, f64), BakeError> {
                 let key = slice_key(&out.atmosphere_hash, &out.spectral, view, opts.quality.name());
                 let queued = fog_rendered[k].lock().unwrap().get_mut(&key).map(|(image, cost)| (image.clone(), std::mem::take(cost)));
-                let (image, cost) = match queued {
-                    Some(r) => r,
-                    None => {
-                        let s = session.as_ref().unwrap_or_else(|| made.get_or_init(|| Session::on_farm(atms[k].clone(), bundle.clone(), out.spectral.clone(), &optics, mie, farm.clone(), &|| {})));
-                        let start = Instant::now();
-                        let r = s.render_view(view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog)"), index, source })?;
-                        (r.image, start.elapsed().as_secs_f64() * opts.cores as f64)
-                    }
-                };
+                let (image, cost) = queued.ok_or_else(|| BakeError::FogSliceLost { sky: name.clone(), index, cache: opts.cache.dir().to_path_buf() })?;
                 let mut t = tracker.lock().unwrap();
                 t.texels_before += (view.width * view.height) as u64;
                 t.slices_done += 1;
@@ -783,7 +774,7 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
 
 /// A job in the bake's queue: a basis sky's strip of slices, or one of its
 /// fog slices.
-struct QueuedStrip {
+struct QueuedJob {
     /// The sky's place in the bake, and its name ("NAME (fog)" for fog).
     k: usize,
     sky: String,
@@ -810,10 +801,10 @@ struct StripOutcome {
 /// the cache folder: a bake killed mid-strip resumes from the columns it
 /// had (the journal goes once the queue is done). Returns the part, the
 /// journal's path and the columns taken from it.
-fn journaled_part(session: &Session, strip: &View, cache: &SliceCache) -> Result<(FarmPart, std::path::PathBuf, u32), BakeError> {
-    let job = session.job(strip);
+fn journaled_part(session: &Session, view: &View, cache: &SliceCache) -> Result<(FarmPart, std::path::PathBuf, u32), BakeError> {
+    let job = session.job(view);
     let path = cache.dir().join(format!("{}.journal", job.hash));
-    let header = Header { job_hash: job.hash.clone(), width: strip.width as u32, height: strip.height as u32 };
+    let header = Header { job_hash: job.hash.clone(), width: view.width as u32, height: view.height as u32 };
     // A journal that cannot be read back (torn header, another job) is started again.
     let (journal, resumed) = match path.exists().then(|| Journal::resume(&path, &header)) {
         Some(Ok((j, columns))) => (j, columns),
@@ -826,7 +817,7 @@ fn journaled_part(session: &Session, strip: &View, cache: &SliceCache) -> Result
 /// The bake's error for a failed queue: a column that failed names its
 /// basis sky and slice; anything else names the slices of the one job
 /// queued, or every sky queued.
-fn queue_error(queued: &[QueuedStrip], source: FarmError) -> BakeError {
+fn queue_error(queued: &[QueuedJob], source: FarmError) -> BakeError {
     if let FarmError::ColumnFailed { part, column, .. } = &source {
         if let Some(q) = queued.get(*part) {
             let index = q.slices[(*column as usize / q.slice_width.max(1)).min(q.slices.len() - 1)].0;

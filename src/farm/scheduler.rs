@@ -327,7 +327,8 @@ impl Sched {
         }
         if let Some(&start) = self.pending.iter().next() {
             // Not past the end of the part.
-            let end = self.parts[self.part_of(start)].offset + self.parts[self.part_of(start)].width;
+            let part = &self.parts[self.part_of(start)];
+            let end = part.offset + part.width;
             let n = self.batch(w).min(end - start);
             let mut count = 0;
             while count < n && self.pending.contains(&(start + count)) {
