@@ -334,8 +334,10 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
                 grids.push((m, (reference.width * reference.height) as f64 / full));
             }
             if let Some(g) = own_grid {
-                let (m, nodes) = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
-                grids.push((m, (2 * nodes) as f64 / full));
+                // The bake's grid: the sky's nodes measured, and the ground's too.
+                let m = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
+                let nodes = super::ms_grid::MsGrid::new(g, scene.medium.horizon_zenith_deg(sky.altitude_m / 1000.0)).nodes();
+                grids.push((m, nodes as f64 / full));
             }
             for (k, &method) in o.methods.iter().enumerate() {
                 let mut c = measure(sky, fog, z, method, &reference, o, &scene, &pool, cap, cancel)?;

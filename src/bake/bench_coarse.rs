@@ -137,30 +137,20 @@ fn with_far(cells: &[(Cell, DVec3)], sun: DVec3) -> CoarseMs {
     CoarseMs { far_cells: f.cells, far_rms_rel_error: f.rms_rel_error, far_noise_floor: f.noise_floor, ..interpolation_error(&all) }
 }
 
-/// The direction of row `s` and column `t` (both in [0, 1]) of a grid over
-/// the sky of its own, independent of the LUT's mapping: zenith angles
-/// crowding toward the horizon, θ = θ_max (1 − (1 − s)²) with θ_max
-/// [`LATLONG_MAX_ZENITH_DEG`], and azimuths from the sun's, φ = 180° t
-/// (the sky is mirror-symmetric about the sun's vertical).
-fn latlong_direction(s: f64, t: f64, sun_azimuth_deg: f64) -> DVec3 {
-    let zenith_deg = LATLONG_MAX_ZENITH_DEG * (1.0 - (1.0 - s) * (1.0 - s));
-    crate::render::camera::direction_deg(zenith_deg, sun_azimuth_deg + 180.0 * t)
-}
-
-/// The lowest row of the grid of [`measure_latlong`]: just above the
-/// horizon of an observer on the ground.
-pub const LATLONG_MAX_ZENITH_DEG: f64 = 89.9;
-
 /// Measures multiple scattering interpolated from a grid of its own over
-/// the sky (`rows` × `cols` nodes, see [`latlong_direction`]) instead of the
+/// the sky (the sky's `rows` × `cols` nodes of the bake's
+/// [`super::ms_grid::MsGrid`]) instead of the
 /// LUT's texels, whose mapping bends steeply at low sun: nodes and cell
 /// centres rendered at the reference's samples. The sky above the horizon
 /// only (a grid below it, for the ground, would be of the same kind and is
-/// not measured). Returns the figures and the count of nodes.
-pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<(CoarseMs, usize), BenchError> {
+/// not measured).
+pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<CoarseMs, BenchError> {
     let az = reference_view.sun_azimuth_deg;
-    let node = |i: usize, j: usize| latlong_direction(j as f64 / (rows - 1) as f64, i as f64 / (cols - 1) as f64, az);
-    let centre = |i: usize, j: usize| latlong_direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64, az);
+    // Row s and column t, both in [0, 1], of the grid's sky.
+    let grid = super::ms_grid::MsGrid::new([rows, cols], scene.medium.horizon_zenith_deg(reference_view.altitude_m / 1000.0));
+    let direction = |s: f64, t: f64| crate::render::camera::direction_deg(grid.sky_zenith_deg(s), az + 180.0 * t);
+    let node = |i: usize, j: usize| direction(j as f64 / (rows - 1) as f64, i as f64 / (cols - 1) as f64);
+    let centre = |i: usize, j: usize| direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64);
     let mut dirs: Vec<DVec3> = (0..rows * cols).map(|k| node(k % cols, k / cols)).collect();
     dirs.extend((0..(rows - 1) * (cols - 1)).map(|k| centre(k % (cols - 1), k / (cols - 1))));
     let view = View {
@@ -181,7 +171,7 @@ pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], s
             (Cell { corners, centre: at(rows * cols + k) }, dirs[rows * cols + k])
         })
         .collect();
-    Ok((with_far(&cells, reference_view.sun_direction()), rows * cols))
+    Ok(with_far(&cells, reference_view.sun_direction()))
 }
 
 /// A rendered texel: its luminance, the standard error of that, and the

@@ -11,6 +11,8 @@
 //! band_nm = 5.0
 //! spp = 16384                # the most a texel may take
 //! max_rel_error = 0.01       # adaptive: stop at this standard error of Y
+//! ms_grid = "16x13"          # optional: multiple scattering on a grid of its own
+//!                            # (rows x azimuths), interpolated (bake::ms_grid)
 //!
 //! [[sky]]                    # in the talk's order: clear, hazed, cloudy0 ... cloudy5
 //! name = "clear"
@@ -64,6 +66,11 @@ pub struct Sampling {
     pub spp: u32,
     /// Adaptive sampling's target standard error of Y, relative.
     pub max_rel_error: Option<f64>,
+    /// Multiple scattering rendered on a grid of its own of [rows,
+    /// columns] over the sky and interpolated to the texels
+    /// ([`super::ms_grid`]); None: every texel rendered.
+    #[serde(default)]
+    pub ms_grid: Option<[usize; 2]>,
 }
 
 /// One basis sky of a bake.
@@ -157,6 +164,7 @@ struct RawSampling {
     band_nm: Option<S<f64>>,
     spp: Option<S<i64>>,
     max_rel_error: Option<S<f64>>,
+    ms_grid: Option<S<String>>,
 }
 
 #[derive(Deserialize)]
@@ -178,9 +186,16 @@ struct RawSky {
 /// rounding error (about 1 %).
 pub fn default_sampling(q: Quality) -> Sampling {
     match q {
-        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None },
-        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01) },
+        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None },
+        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None },
     }
+}
+
+/// "RxC" with R and C from 2 to 1024.
+fn parse_grid(text: &str) -> Option<[usize; 2]> {
+    let (r, c) = text.trim().split_once(['x', 'X'])?;
+    let (r, c): (usize, usize) = (r.trim().parse().ok()?, c.trim().parse().ok()?);
+    ((2..=1024).contains(&r) && (2..=1024).contains(&c)).then_some([r, c])
 }
 
 struct Ctx<'a> {
@@ -221,6 +236,12 @@ impl Ctx<'_> {
                 s.max_rel_error = Some(e_v);
             } else {
                 self.err(e, format!("{what}.max_rel_error: must be between 0 and 1 (a fraction, e.g. 0.01), got {e_v}"));
+            }
+        }
+        if let Some(g) = &raw.ms_grid {
+            match parse_grid(g.get_ref()) {
+                Some(grid) => s.ms_grid = Some(grid),
+                None => self.err(g, format!("{what}.ms_grid: expected \"ROWSxCOLUMNS\", each from 2 to 1024 (e.g. \"16x13\"), got {:?}", g.get_ref())),
             }
         }
         s
@@ -372,11 +393,22 @@ mod tests {
         assert_eq!(b.skies.len(), 1);
         let s = &b.skies[0];
         assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
-        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None });
-        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02) });
+        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None });
+        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None });
         assert_eq!(b.fog, FogSettings { ceiling_km: 3.0, width: 32, height: 32 });
         let b = parse("[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[fog]\nceiling_km = 2.5\nwidth = 8\nheight = 4\n").unwrap();
         assert_eq!(b.fog, FogSettings { ceiling_km: 2.5, width: 8, height: 4 });
+        let b = parse("[quality.final]\nms_grid = \"16x13\"\n[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n").unwrap();
+        assert_eq!((b.skies[0].final_.ms_grid, b.skies[0].draft.ms_grid), (Some([16, 13]), None));
+    }
+
+    #[test]
+    fn a_bad_grid_is_named_with_its_line() {
+        for bad in ["16", "1x13", "16x0", "ax3", "2000x4"] {
+            let e = parse(&format!("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n[sky.quality.draft]\nms_grid = \"{bad}\"\n")).unwrap_err();
+            assert!(e.to_string().contains("test-bake.toml:7: ") && e.to_string().contains("ms_grid: expected \"ROWSxCOLUMNS\""), "{bad}: {e}");
+        }
+        assert_eq!(parse_grid(" 8 x 5 "), Some([8, 5]));
     }
 
     #[test]

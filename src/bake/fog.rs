@@ -138,22 +138,8 @@ pub fn to_render(sky: &super::SkySlices, fog: &FogSettings, cache: &SliceCache, 
 pub fn time_quadrature(scene: &Scene, view: &View) -> f64 {
     let lit = View { fog: view.fog.map(|f| Fog { shadowed: false, ..f }), ..view.clone() };
     let start = Instant::now();
-    std::hint::black_box(single_per_texel(scene, &lit));
+    std::hint::black_box(crate::render::single_per_pixel(scene, &lit));
     start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64
-}
-
-/// The quadrature's single scattering of sunlight toward each texel of
-/// `lit_view` (a Fog view), CIE XYZ, row-major; in parallel.
-fn single_per_texel(scene: &Scene, lit_view: &View) -> Vec<[f64; 3]> {
-    use rayon::prelude::*;
-    let (w, h) = (lit_view.width, lit_view.height);
-    (0..w * h)
-        .into_par_iter()
-        .map(|i| {
-            let dir = lit_view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h);
-            dir.map_or([0.0; 3], |d| crate::render::single_by_quadrature(scene, lit_view, d).0)
-        })
-        .collect()
 }
 
 /// The cache key of a basis sky's [`FogExtras`].
@@ -250,7 +236,7 @@ pub fn bake_fog(
 /// `core_seconds` are the quadrature's, on this process's threads.
 pub fn lit_of_shadowed(scene: &Scene, lit_view: &View, shadowed: &RenderedSlice) -> RenderedSlice {
     let start = Instant::now();
-    let single = single_per_texel(scene, lit_view);
+    let single = crate::render::single_per_pixel(scene, lit_view);
     let xyz = shadowed.xyz.iter().zip(&single).map(|(s, q)| std::array::from_fn(|c| s[c] + q[c])).collect();
     RenderedSlice { xyz, core_seconds: start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64, ..shadowed.clone() }
 }
@@ -283,7 +269,7 @@ mod tests {
     fn the_fog_is_its_shadowed_fog_plus_the_quadratures_single_scattering() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh_hg.toml");
         let atm = Atmosphere::load(&path).unwrap();
-        let spectral = crate::bake::run::spectral_settings(&Sampling { band_nm: 10.0, spp: 16, max_rel_error: None });
+        let spectral = crate::bake::run::spectral_settings(&Sampling { band_nm: 10.0, spp: 16, max_rel_error: None, ms_grid: None });
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
         let cancel = AtomicBool::new(false);
         let dirs = vec![(30.0, 0.0), (60.0, 90.0), (88.0, 180.0), (90.0, 10.0), (93.0, 0.0), (120.0, 45.0)];

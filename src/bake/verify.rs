@@ -318,7 +318,7 @@ fn quantisation(
     let mut rel = Vec::new();
     for (index, s) in entry.slices.iter().enumerate() {
         let view = super::run::slice_view(&sky, sampling, index, entry.planet_radius_km, entry.top_km, entry.threshold_sun_zenith_deg);
-        let key = super::cache::slice_key(&session.atmosphere.content_hash, &session.spectral, &view, quality.name());
+        let key = super::run::sky_slice_key(&session.atmosphere.content_hash, &session.spectral, &view, quality, sampling);
         let slice = cache.get(&key)?;
         let scale = (-s.scale_log2 as f64).exp2();
         for (t, x) in texture.layers[index].iter().zip(&slice.xyz) {

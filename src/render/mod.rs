@@ -389,6 +389,21 @@ pub fn single_by_quadrature(scene: &Scene, s: &View, dir: DVec3) -> ([f64; 3], V
     }
 }
 
+/// [`single_by_quadrature`] toward the centre of every pixel of `s` (a
+/// camera that does not jitter), CIE XYZ, row-major; in parallel. Zero where
+/// the camera sees nothing.
+pub fn single_per_pixel(scene: &Scene, s: &View) -> Vec<[f64; 3]> {
+    use rayon::prelude::*;
+    let (w, h) = (s.width, s.height);
+    (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let dir = s.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h);
+            dir.map_or([0.0; 3], |d| single_by_quadrature(scene, s, d).0)
+        })
+        .collect()
+}
+
 /// Renders one pixel (index y·width + x). A pure function of the scene,
 /// the settings and the index: the farm and the local renderer share it.
 pub fn render_pixel(scene: &Scene, s: &View, pixel: usize) -> PixelResult {

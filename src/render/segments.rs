@@ -10,6 +10,20 @@ use super::medium::Medium;
 use crate::atmosphere::Geometry;
 use glam::DVec3;
 
+/// The lowest observer: 1 mm above the ground.
+pub const MIN_OBSERVER_KM: f64 = 1e-6;
+
+/// The zenith angle of the horizon an observer at `altitude_km` sees (as
+/// [`Medium::observer`] places it), degrees: beyond it rays meet the
+/// ground. 90° over a plane; over a sphere of `radius_km` 90° plus the dip
+/// acos(r / (r + h)), 0.001° for the lowest observer.
+pub fn horizon_zenith_deg(geometry: Geometry, radius_km: f64, altitude_km: f64) -> f64 {
+    match geometry {
+        Geometry::PlaneParallel => 90.0,
+        Geometry::Spherical => 90.0 + libm::acos(radius_km / (radius_km + altitude_km.max(MIN_OBSERVER_KM))).to_degrees(),
+    }
+}
+
 /// Nudge past a boundary, km.
 pub(crate) const EPS_KM: f64 = 1e-9;
 /// The most shells one ray may cross (a guard against rounding loops: a ray
@@ -101,13 +115,19 @@ impl Medium {
     }
 
     /// A point at `altitude_km` above the origin of the horizontal plane
-    /// (at least 1 mm, so rays looking down meet the ground ahead of them).
+    /// (at least [`MIN_OBSERVER_KM`], so rays looking down meet the ground
+    /// ahead of them).
     pub fn observer(&self, altitude_km: f64) -> DVec3 {
-        let altitude_km = altitude_km.max(1e-6);
+        let altitude_km = altitude_km.max(MIN_OBSERVER_KM);
         match self.geometry {
             Geometry::Spherical => DVec3::new(0.0, 0.0, self.radius_km + altitude_km),
             Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
         }
+    }
+
+    /// [`horizon_zenith_deg`] for this medium's planet.
+    pub fn horizon_zenith_deg(&self, altitude_km: f64) -> f64 {
+        horizon_zenith_deg(self.geometry, self.radius_km, altitude_km)
     }
 
     /// The local vertical at `p`.
