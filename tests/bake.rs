@@ -255,8 +255,18 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
         String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect::<Vec<serde_json::Value>>()
     };
     let find = |events: &[serde_json::Value], name: &str| events.iter().rev().find(|e| e["event"] == name).cloned().unwrap_or_else(|| panic!("no {name} in {events:?}"));
-    bake(&plain, "plain");
+    // Progress never goes back, also after the queue (the plain bake's fog
+    // slices and the grid's resampling come after it), and every slice
+    // rendered now carries its forecast.
+    let check_progress = |events: &[serde_json::Value]| {
+        let done: Vec<u64> = events.iter().filter(|e| e["event"] == "progress").filter_map(|e| e["texels_done"].as_u64()).collect();
+        assert!(done.windows(2).all(|w| w[0] <= w[1]), "progress went back: {done:?}");
+        let rendered: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "slice" && e["cached"] == false).collect();
+        assert!(!rendered.is_empty() && rendered.iter().all(|e| e["forecast_core_seconds"].as_f64().is_some_and(|f| f > 0.0)), "{rendered:?}");
+    };
+    check_progress(&bake(&plain, "plain"));
     let events = bake(&grid, "grid");
+    check_progress(&events);
     // 6 x 5 nodes over the sky and 2 x 5 under it, for each of 64 slices
     // (63 distinct): none taken from the plain bake's slices, while its fog
     // slices (which the grid does not touch) all are.

@@ -336,7 +336,7 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
             if let Some(g) = own_grid {
                 // The bake's grid: the sky's nodes measured, and the ground's too.
                 let m = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
-                let nodes = super::ms_grid::MsGrid::new(g, scene.medium.horizon_zenith_deg(sky.altitude_m / 1000.0)).nodes();
+                let nodes = super::ms_grid::MsGrid::new(g, scene.medium.standpoint(sky.altitude_m / 1000.0)).nodes();
                 grids.push((m, nodes as f64 / full));
             }
             for (k, &method) in o.methods.iter().enumerate() {

@@ -147,7 +147,7 @@ fn with_far(cells: &[(Cell, DVec3)], sun: DVec3) -> CoarseMs {
 pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<CoarseMs, BenchError> {
     let az = reference_view.sun_azimuth_deg;
     // Row s and column t, both in [0, 1], of the grid's sky.
-    let grid = super::ms_grid::MsGrid::new([rows, cols], scene.medium.horizon_zenith_deg(reference_view.altitude_m / 1000.0));
+    let grid = super::ms_grid::MsGrid::new([rows, cols], scene.medium.standpoint(reference_view.altitude_m / 1000.0));
     let direction = |s: f64, t: f64| crate::render::camera::direction_deg(grid.sky_zenith_deg(s), az + 180.0 * t);
     let node = |i: usize, j: usize| direction(j as f64 / (rows - 1) as f64, i as f64 / (cols - 1) as f64);
     let centre = |i: usize, j: usize| direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64);

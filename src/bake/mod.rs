@@ -43,8 +43,9 @@ pub enum BakeEvent {
     /// pilots' pace); with a fixed sample count from probes (a few slices
     /// at a sixteenth of their texels, timed). `from`: "pilots" or "probes".
     Forecast { from: &'static str, core_seconds: f64, samples: u64, planning_core_seconds: f64 },
-    /// One slice is done (rendered now, or found in the cache).
-    Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, mean_samples: f64 },
+    /// One slice is done (rendered now, or found in the cache), with what
+    /// it cost and, rendered now after a forecast, what was forecast.
+    Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, forecast_core_seconds: Option<f64>, mean_samples: f64 },
     /// Every slice of a basis sky is done.
     SkyDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64 },
     /// A fog slice of a basis sky is done: its Fog and Shadowed Fog

@@ -13,28 +13,42 @@
 //! The grid is not the LUT's: the talk's sun-centred mapping bends steeply
 //! at low sun, and interpolating M across its texels missed by 4.5 % (clear)
 //! and 11 % (hazed) at a sun zenith of 85° (`sky bench bake --coarse-ms`,
-//! README). It is a latitude-longitude grid turned to the sun: R rows of
-//! zenith angle over the sky, crowding toward the horizon,
+//! README). It is a grid turned to the sun, of C azimuths from the sun's,
+//! φ = 180° t, t = i / (C − 1) (the sky is mirror-symmetric about the sun's
+//! vertical), by R rows of zenith angle over the sky, crowding toward the
+//! horizon,
 //!
 //!   θ = θ_sky (1 − (1 − s)²),  s = j / (R − 1),
 //!
-//! θ_sky 0.01° above the observer's horizon (where the renderer's rays
-//! start meeting the ground: 0.001° below the horizontal for its lowest
-//! observer, 1 mm up), and rows mirrored from the nadir up to 0.01° below it
-//! for the ground (G = max(2, ⌈R / 4⌉)
-//! rows: at the ground the view sees the same sunlit ground in every
-//! direction, and only an observer above it sees more), by C azimuths from
-//! the sun's, φ = 180° t, t = i / (C − 1) (the sky is mirror-symmetric about
-//! the sun's vertical). A texel between a last row and the horizon takes the
-//! row's value: the horizon, where the sky meets the ground, is the one
-//! edge no bilinear filter may cross.
+//! θ_sky a hair (`HORIZON_MARGIN_DEG`) above the observer's horizon (where
+//! the renderer's rays start meeting the ground: 0.001° below the horizontal
+//! for its lowest observer, 1 mm up), and G = max(2, ⌈R / 4⌉) rows over the
+//! ground, evenly spaced in the distance to the ground, from the nadir's
+//! (the observer's altitude) to the distance a hair below the horizon.
+//!
+//! The weights are linear in the zenith angle between two sky rows and in
+//! the distance to the ground between two ground rows, not in s: a bake of
+//! the hazed sky at a sun zenith of 85° measured against the same slice
+//! rendered whole showed what else does. Interpolated in s, whose rows
+//! crowd to the horizon as √ of the angle from it, the texels within 0.1° of
+//! the horizon came out 1 % too bright; in angle toward the ground, the
+//! ground texels by the horizon, whose rays from 1 mm up cross 50 to 110 m
+//! of hazy air (the angle's last 0.01° holds nearly all of that distance),
+//! came out 20 % too dark: their multiple scattering is mostly the light
+//! the air between scatters, in proportion to that distance. A texel
+//! between a last row and the horizon takes the row's value: the horizon,
+//! where the sky meets the ground, is the one edge no bilinear filter may
+//! cross.
 
 use crate::render::camera::Camera;
+use crate::render::segments::Standpoint;
 use crate::render::{Image, PixelResult, Scene, View};
 use glam::DVec3;
 
-/// How far from the horizon the grid's last rows lie, degrees.
-pub const HORIZON_MARGIN_DEG: f64 = 0.01;
+/// How far from the horizon the grid's last rows lie, degrees: 0.0001°,
+/// where the ground is 73 m away from the lowest observer (113 m at the
+/// horizon itself).
+pub const HORIZON_MARGIN_DEG: f64 = 1e-4;
 
 /// A grid of directions over the sphere, turned to the sun (see the module).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,18 +56,16 @@ pub struct MsGrid {
     pub rows: usize,
     pub cols: usize,
     pub ground_rows: usize,
-    /// The zenith angle of the observer's horizon, degrees (90 on the ground).
-    pub horizon_zenith_deg: f64,
+    /// Where the observer stands: its horizon, and how far the ground is.
+    pub standpoint: Standpoint,
 }
 
 impl MsGrid {
-    /// The grid of `[rows, cols]` (both 2 or more) for an observer whose
-    /// horizon lies at `horizon_zenith_deg`
-    /// ([`crate::render::segments::horizon_zenith_deg`]: where the renderer's
-    /// rays start meeting the ground, for the texels to be told apart as the
-    /// renderer tells them).
-    pub fn new([rows, cols]: [usize; 2], horizon_zenith_deg: f64) -> MsGrid {
-        MsGrid { rows, cols, ground_rows: rows.div_ceil(4).max(2), horizon_zenith_deg }
+    /// The grid of `[rows, cols]` (both 2 or more) for an observer at
+    /// `standpoint` (the renderer's, for the texels to be told from the
+    /// ground as the renderer tells them).
+    pub fn new([rows, cols]: [usize; 2], standpoint: Standpoint) -> MsGrid {
+        MsGrid { rows, cols, ground_rows: rows.div_ceil(4).max(2), standpoint }
     }
 
     /// Nodes in all: the sky's rows, then the ground's, each of `cols`.
@@ -61,16 +73,29 @@ impl MsGrid {
         (self.rows + self.ground_rows) * self.cols
     }
 
-    /// The sky's angular extent from the zenith and the ground's from the
-    /// nadir, degrees.
-    fn extents_deg(&self) -> (f64, f64) {
-        (self.horizon_zenith_deg - HORIZON_MARGIN_DEG, 180.0 - self.horizon_zenith_deg - HORIZON_MARGIN_DEG)
+    /// The zenith angle of the sky's last row, degrees.
+    fn sky_extent_deg(&self) -> f64 {
+        self.standpoint.horizon_zenith_deg() - HORIZON_MARGIN_DEG
+    }
+
+    /// The distances to the ground of the ground's first row (the nadir)
+    /// and last row (by the horizon), km.
+    fn ground_extent_km(&self) -> (f64, f64) {
+        let last = self.standpoint.horizon_zenith_deg() + HORIZON_MARGIN_DEG;
+        (self.standpoint.altitude_km, self.standpoint.ground_distance_km(last).expect("below the horizon"))
     }
 
     /// The zenith angle of row `s` in [0, 1] of the sky's rows (0 the
     /// zenith, 1 the last row over the horizon), degrees.
     pub fn sky_zenith_deg(&self, s: f64) -> f64 {
-        self.extents_deg().0 * (1.0 - (1.0 - s) * (1.0 - s))
+        self.sky_extent_deg() * (1.0 - (1.0 - s) * (1.0 - s))
+    }
+
+    /// The distance to the ground of the ground's row `s` in [0, 1] (0 the
+    /// nadir, 1 the last row under the horizon), km.
+    fn ground_distance_km(&self, s: f64) -> f64 {
+        let (near, far) = self.ground_extent_km();
+        near + (far - near) * s
     }
 
     /// Node `k` (row-major: the sky's rows from the zenith down, then the
@@ -83,7 +108,12 @@ impl MsGrid {
             self.sky_zenith_deg(row as f64 / (self.rows - 1) as f64)
         } else {
             let s = (row - self.rows) as f64 / (self.ground_rows - 1) as f64;
-            180.0 - self.extents_deg().1 * (1.0 - (1.0 - s) * (1.0 - s))
+            // The nadir row exactly (the inverse's rounding aside).
+            if s == 0.0 {
+                180.0
+            } else {
+                self.standpoint.zenith_for_ground_distance_deg(self.ground_distance_km(s))
+            }
         };
         (zenith_deg, azimuth_deg)
     }
@@ -95,11 +125,24 @@ impl MsGrid {
         // Azimuth from the sun's, folded into [0, 180] by the mirror symmetry.
         let phi = (libm::atan2(d.y, d.x).to_degrees() - sun_azimuth_deg).rem_euclid(360.0);
         let phi = if phi > 180.0 { 360.0 - phi } else { phi };
-        let (sky, ground) = self.extents_deg();
-        // Inverse of α = A (1 − (1 − s)²): s = 1 − √(1 − α / A).
-        let s_of = |alpha: f64, a: f64| 1.0 - (1.0 - (alpha / a).clamp(0.0, 1.0)).sqrt();
-        let (first_row, rows, s) = if zenith_deg <= self.horizon_zenith_deg { (0, self.rows, s_of(zenith_deg, sky)) } else { (self.rows, self.ground_rows, s_of(180.0 - zenith_deg, ground)) };
-        let (r, c) = (s * (rows - 1) as f64, phi / 180.0 * (self.cols - 1) as f64);
+        // The row coordinate: over the sky, the row below by the inverse of
+        // θ = A (1 − (1 − s)²), s = 1 − √(1 − θ / A), then linear in θ
+        // between it and the next; over the ground, linear in the distance.
+        let (first_row, rows, r) = match self.standpoint.ground_distance_km(zenith_deg).filter(|_| zenith_deg > self.standpoint.horizon_zenith_deg()) {
+            None => {
+                let a = self.sky_extent_deg();
+                let last = (self.rows - 1) as f64;
+                let s = 1.0 - (1.0 - (zenith_deg / a).clamp(0.0, 1.0)).sqrt();
+                let r0 = (s * last).floor().min(last - 1.0);
+                let (z0, z1) = (self.sky_zenith_deg(r0 / last), self.sky_zenith_deg((r0 + 1.0) / last));
+                (0, self.rows, r0 + ((zenith_deg - z0) / (z1 - z0)).clamp(0.0, 1.0))
+            }
+            Some(distance_km) => {
+                let (near, far) = self.ground_extent_km();
+                (self.rows, self.ground_rows, ((distance_km - near) / (far - near)).clamp(0.0, 1.0) * (self.ground_rows - 1) as f64)
+            }
+        };
+        let c = phi / 180.0 * (self.cols - 1) as f64;
         let (r0, c0) = ((r.floor() as usize).min(rows - 2), (c.floor() as usize).min(self.cols - 2));
         let (fr, fc) = (r - r0 as f64, c - c0 as f64);
         let at = |row: usize, col: usize| (first_row + row) * self.cols + col;
@@ -165,10 +208,11 @@ impl MsGrid {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::atmosphere::Geometry;
     use crate::render::camera::direction_deg;
 
     fn grid() -> MsGrid {
-        MsGrid::new([9, 7], 90.0)
+        MsGrid::new([9, 7], Standpoint::new(Geometry::Spherical, 6371.0, 0.0))
     }
 
     /// Every node's own direction gets weight 1 on itself.
@@ -188,9 +232,11 @@ mod tests {
         }
     }
 
-    /// A field linear in the rows' and columns' coordinates comes back
-    /// exactly, the weights sum to 1, the mirror image about the sun's
-    /// vertical gets the same weights, and no weight crosses the horizon.
+    /// A field linear in the rows' and columns' coordinates (between rows,
+    /// in the zenith angle over the sky and in the distance to the ground
+    /// under it) comes back exactly, the weights sum to 1, the mirror image
+    /// about the sun's vertical gets the same weights, and no weight crosses
+    /// the horizon.
     #[test]
     fn bilinear_fields_come_back_and_the_horizon_is_not_crossed() {
         let g = grid();
@@ -199,14 +245,25 @@ mod tests {
             let (row, col) = (k / g.cols, k % g.cols);
             1.0 + 0.3 * row as f64 + 0.1 * col as f64 + 0.02 * (row * col) as f64
         };
-        for (z, a) in [(10.0, 5.0), (45.0, 100.0), (89.95, 170.0), (90.05, 60.0), (135.0, 179.0), (179.5, 0.0)] {
+        let horizon = g.standpoint.horizon_zenith_deg();
+        // The sky rows' zenith angles, and the ground rows' distances.
+        let sky_rows: Vec<f64> = (0..9).map(|j| g.node_deg(j * 7, 0.0).0).collect();
+        let (near, far) = (g.standpoint.altitude_km, g.standpoint.ground_distance_km(horizon + HORIZON_MARGIN_DEG).unwrap());
+        // By the zenith, between the sky's last two rows, between its last
+        // row and the horizon; under it, a ground texel by the horizon (60 m
+        // away from 1 mm up), and farther down.
+        for (z, a) in [(10.0, 5.0), (45.0, 100.0), (89.95, 170.0), (90.0005, 20.0), (90.0012, 30.0), (90.05, 60.0), (135.0, 179.0), (179.5, 0.0)] {
             let d = direction_deg(z, sun_az + a);
             let w = g.weights(d, sun_az);
             assert!((w.iter().map(|x| x.1).sum::<f64>() - 1.0).abs() < 1e-12, "{w:?}");
-            assert!(w.iter().all(|&(n, x)| x >= -1e-12 && (n < g.rows * g.cols) == (z < 90.0)), "({z}, {a}): {w:?}");
-            // Row and column coordinates of d, from the grid's own formulas.
-            let (sky, ground) = g.extents_deg();
-            let r = if z < 90.0 { (1.0 - (1.0 - (z / sky).min(1.0)).sqrt()) * 8.0 } else { 9.0 + (1.0 - (1.0 - ((180.0 - z) / ground).min(1.0)).sqrt()) * 2.0 };
+            assert!(w.iter().all(|&(n, x)| x >= -1e-12 && (n < g.rows * g.cols) == (z < horizon)), "({z}, {a}): {w:?}");
+            // Row and column coordinates of d.
+            let r = if z < horizon {
+                let j = sky_rows.iter().rposition(|&zj| zj <= z).unwrap().min(7);
+                j as f64 + ((z - sky_rows[j]) / (sky_rows[j + 1] - sky_rows[j])).min(1.0)
+            } else {
+                9.0 + ((g.standpoint.ground_distance_km(z).unwrap() - near) / (far - near)).min(1.0) * 2.0
+            };
             let c = a / 180.0 * 6.0;
             let want = 1.0 + 0.3 * r + 0.1 * c + 0.02 * r * c;
             let got: f64 = w.iter().map(|&(n, x)| x * field(n)).sum();
@@ -219,17 +276,41 @@ mod tests {
     /// Above the ground the horizon drops below 90°, and the rows follow it.
     #[test]
     fn the_horizon_follows_the_observer() {
-        use crate::atmosphere::Geometry;
-        use crate::render::segments::horizon_zenith_deg;
-        let h = horizon_zenith_deg(Geometry::Spherical, 6371.0, 10.0);
+        let up = Standpoint::new(Geometry::Spherical, 6371.0, 10.0);
+        let h = up.horizon_zenith_deg();
         assert!((h - (90.0 + (6371.0f64 / 6381.0).acos().to_degrees())).abs() < 1e-12 && h > 93.0, "{h}");
         // On the ground, the renderer's observer is 1 mm up: 0.001° of dip.
-        let ground = horizon_zenith_deg(Geometry::Spherical, 6371.0, 0.0);
+        let ground = Standpoint::new(Geometry::Spherical, 6371.0, 0.0).horizon_zenith_deg();
         assert!(ground > 90.0009 && ground < 90.0011, "{ground}");
-        assert_eq!(horizon_zenith_deg(Geometry::PlaneParallel, 6371.0, 10.0), 90.0);
-        let g = MsGrid::new([5, 3], h);
+        assert_eq!(Standpoint::new(Geometry::PlaneParallel, 6371.0, 10.0).horizon_zenith_deg(), 90.0);
+        let g = MsGrid::new([5, 3], up);
         let last_sky = g.node_deg(4 * 3, 0.0).0;
         let last_ground = g.node_deg(g.nodes() - 1, 0.0).0;
         assert!((last_sky - (h - HORIZON_MARGIN_DEG)).abs() < 1e-9 && (last_ground - (h + HORIZON_MARGIN_DEG)).abs() < 1e-9, "{last_sky} {last_ground}");
+    }
+
+    /// The distance to the ground: the altitude at the nadir, √(h (2R + h))
+    /// at the horizon (the tangent's length), h / cos α over a plane, none
+    /// above the horizon; and its inverse gives the angle back.
+    #[test]
+    fn the_distance_to_the_ground_and_back() {
+        for (geometry, altitude_km) in [(Geometry::Spherical, 0.0), (Geometry::Spherical, 0.3), (Geometry::Spherical, 10.0), (Geometry::PlaneParallel, 0.3)] {
+            let p = Standpoint::new(geometry, 6371.0, altitude_km);
+            let (h, horizon) = (p.altitude_km, p.horizon_zenith_deg());
+            assert!((p.ground_distance_km(180.0).unwrap() - h).abs() < 1e-12 * h.max(1.0), "{p:?}");
+            assert_eq!(p.ground_distance_km(horizon - 1e-6), None, "{p:?}");
+            if geometry == Geometry::Spherical {
+                let tangent = (h * (2.0 * 6371.0 + h)).sqrt();
+                let by_horizon = p.ground_distance_km(horizon + 1e-9).unwrap();
+                assert!((by_horizon - tangent).abs() < 0.01 * tangent, "{p:?}: {by_horizon} against {tangent}");
+            } else {
+                assert!((p.ground_distance_km(120.0).unwrap() - h / 60f64.to_radians().cos()).abs() < 1e-12);
+            }
+            for z in [horizon + HORIZON_MARGIN_DEG, horizon + 0.01, 100.0, 150.0, 179.9] {
+                let t = p.ground_distance_km(z).unwrap();
+                let back = p.zenith_for_ground_distance_deg(t);
+                assert!((back - z).abs() < 1e-7, "{p:?}: {z} -> {t} km -> {back}");
+            }
+        }
     }
 }

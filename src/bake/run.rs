@@ -28,7 +28,7 @@ use crate::farm::journal::{Header, Journal};
 use crate::lut::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
 use crate::render::camera::Camera;
-use crate::render::segments::horizon_zenith_deg;
+use crate::render::segments::Standpoint;
 use crate::render::tracer::Estimator;
 use crate::render::{adaptive, Image, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
 use crate::session::{OpticsCache, Session, SharedFarm};
@@ -386,7 +386,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             views.push(if hit.is_some() { None } else { Some((view, key)) });
             slices.push(hit);
         }
-        let grid = sampling.ms_grid.map(|g| MsGrid::new(g, horizon_zenith_deg(atm.planet.geometry, radius_km, sky.altitude_m / 1000.0)));
+        let grid = sampling.ms_grid.map(|g| MsGrid::new(g, Standpoint::new(atm.planet.geometry, radius_km, sky.altitude_m / 1000.0)));
         let out = SkySlices {
             sky: sky.clone(),
             atmosphere_name: bundle.name.clone(),
@@ -475,9 +475,13 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         sessions.push(Some(session));
     }
     // What the pilots say each slice will cost, core-seconds, by slice
-    // index: the sky's and the fog's.
+    // index: the sky's and the fog's, in the queue; and of the work on this
+    // process after the queue (single scattering by quadrature: a grid's
+    // resampling, the Fog from its Shadowed Fog), the sky's and the fog's.
     let mut forecasts: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
     let mut fog_forecasts = forecasts.clone();
+    let mut after_queue = forecasts.clone();
+    let mut fog_after_queue = forecasts.clone();
     // Every view to render once, with whether it is a fog slice's.
     let to_forecast = |k: usize| {
         let p = &plan[k];
@@ -516,11 +520,12 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     (false, Some(g)) => g.time_quadrature(&session.scene, &p.views[index].as_ref().expect("to render").0),
                     (false, None) => 0.0,
                 };
-                let fixed = (one_core_s - texels * per_sample).max(0.0) + quadrature;
+                let fixed = (one_core_s - texels * per_sample).max(0.0);
                 let planned: u64 = planned_samples(view, &image).iter().map(|&n| n as u64).sum();
-                let f = if fog { &mut fog_forecasts[k][index] } else { &mut forecasts[k][index] };
+                let (f, after) = if fog { (&mut fog_forecasts[k][index], &mut fog_after_queue[k][index]) } else { (&mut forecasts[k][index], &mut after_queue[k][index]) };
                 *f = fixed + planned as f64 * per_sample;
-                total += *f;
+                *after = quadrature;
+                total += *f + quadrature;
                 samples += planned;
             }
         }
@@ -546,6 +551,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     continue;
                 }
                 let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
+                // The quadrature after the queue, core-seconds per slice.
+                let mut per_slice_after: Vec<(usize, f64)> = Vec::new();
                 for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
                     if cancel.load(Ordering::SeqCst) {
                         return Err(BakeError::Cancelled);
@@ -585,15 +592,19 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
                     let texels = (probe.width * probe.height) as f64;
                     let whole = timed(&probe)?;
-                    let quadrature = if fog { super::fog::time_quadrature(&session.scene, &probe) / texels } else { 0.0 };
-                    per_slice_fixed.push((index, fixed + grid_quadrature));
-                    per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0) + quadrature));
+                    // A fog slice's quadrature, timed on its probe, for the
+                    // whole slice (every fog slice has the Fog LUT's size).
+                    let fog_quadrature = if fog { super::fog::time_quadrature(&session.scene, &probe) * (bake.fog.width * bake.fog.height) as f64 / texels } else { 0.0 };
+                    per_slice_fixed.push((index, fixed));
+                    per_slice_after.push((index, grid_quadrature + fog_quadrature));
+                    per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
                 }
                 for (index, view, is_fog) in to_forecast(k).filter(|v| v.2 == fog) {
                     let texels = (view.width * view.height) as f64;
-                    let f = if is_fog { &mut fog_forecasts[k][index] } else { &mut forecasts[k][index] };
+                    let (f, after) = if is_fog { (&mut fog_forecasts[k][index], &mut fog_after_queue[k][index]) } else { (&mut forecasts[k][index], &mut after_queue[k][index]) };
                     *f = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
-                    total += *f;
+                    *after = interpolate(&per_slice_after, index);
+                    total += *f + *after;
                     samples += texels as u64 * view.spp as u64;
                 }
             }
@@ -671,7 +682,12 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 }
             }
         }
-        tracker.lock().unwrap().job = None;
+        // The queue's texels and forecast are done; what is left is the
+        // work after it, slice by slice, below.
+        let mut t = tracker.lock().unwrap();
+        t.texels_before += queued.iter().map(|q| (q.view.width * q.view.height) as u64).sum::<u64>();
+        t.forecast_done += queued.iter().flat_map(|q| q.slices.iter().map(|s| s.1)).sum::<f64>();
+        t.job = None;
     }
     let mut done = Vec::new();
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
@@ -682,14 +698,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
             if let Some(s) = s {
-                tracker.lock().unwrap().emit(BakeEvent::Slice {
-                    sky: name.clone(),
-                    index,
-                    sun_zenith_deg: s.sun_zenith_deg,
-                    cached: true,
-                    core_seconds: s.core_seconds,
-                    mean_samples: s.mean_samples(),
-                });
+                tracker.lock().unwrap().emit(cached_slice(&name, index, s));
             }
         }
         let mut sky_core_seconds = 0.0;
@@ -728,10 +737,19 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let (view, key) = views[index].as_ref().expect("to render");
                 opts.cache.put(key, &slice)?;
                 let mut t = tracker.lock().unwrap();
-                t.texels_before += texels_per_slice;
                 t.slices_done += 1;
-                t.forecast_done += forecasts[k][index];
-                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: view.sun_zenith_deg, cached: false, core_seconds: slice.core_seconds, mean_samples: slice.mean_samples() });
+                t.forecast_done += after_queue[k][index];
+                let forecast = forecasts[k][index] + after_queue[k][index];
+                let forecast_core_seconds = t.forecast_total.map(|_| forecast);
+                t.emit(BakeEvent::Slice {
+                    sky: name.clone(),
+                    index,
+                    sun_zenith_deg: view.sun_zenith_deg,
+                    cached: false,
+                    core_seconds: slice.core_seconds,
+                    forecast_core_seconds,
+                    mean_samples: slice.mean_samples(),
+                });
                 drop(t);
                 out.slices[index] = Some(slice);
                 out.rendered += 1;
@@ -745,7 +763,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             t.texels_before += texels_per_slice;
             t.slices_done += 1;
             if let Some(s) = &slice {
-                t.emit(BakeEvent::Slice { sky: name.clone(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, mean_samples: s.mean_samples() });
+                t.emit(cached_slice(&name, index, s));
             }
             drop(t);
             out.slices[index] = slice;
@@ -787,9 +805,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 let queued = fog_rendered[k].lock().unwrap().get_mut(&key).map(|(image, cost)| (image.clone(), std::mem::take(cost)));
                 let (image, cost) = queued.ok_or_else(|| BakeError::FogSliceLost { sky: name.clone(), index, cache: opts.cache.dir().to_path_buf() })?;
                 let mut t = tracker.lock().unwrap();
-                t.texels_before += (view.width * view.height) as u64;
                 t.slices_done += 1;
-                t.forecast_done += fog_forecasts[k][index];
+                t.forecast_done += fog_after_queue[k][index];
                 let p = t.progress(0, None);
                 t.emit(BakeEvent::Progress(p));
                 Ok((image, cost))
@@ -822,6 +839,11 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         done.push(out);
     }
     Ok(done)
+}
+
+/// The event of a slice found in the cache (or the same as an earlier one).
+fn cached_slice(sky: &str, index: usize, s: &RenderedSlice) -> BakeEvent {
+    BakeEvent::Slice { sky: sky.to_string(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, forecast_core_seconds: None, mean_samples: s.mean_samples() }
 }
 
 /// The farm options of a bake: the caller's, with the farm's events turned
@@ -1018,7 +1040,7 @@ mod tests {
         let sampling = Sampling { band_nm: 40.0, spp: 512, max_rel_error: None, ms_grid: Some([16, 13]) };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
-        let grid = MsGrid::new([16, 13], horizon_zenith_deg(atm.planet.geometry, atm.planet.radius_km, 0.0));
+        let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
         let z_crit = 4.47;
         for index in [4, 20] {
             let view = View { sun_azimuth_deg: 25.0, ..slice_view(&sky, &sampling, index, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg) };

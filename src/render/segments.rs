@@ -13,14 +13,64 @@ use glam::DVec3;
 /// The lowest observer: 1 mm above the ground.
 pub const MIN_OBSERVER_KM: f64 = 1e-6;
 
-/// The zenith angle of the horizon an observer at `altitude_km` sees (as
-/// [`Medium::observer`] places it), degrees: beyond it rays meet the
-/// ground. 90° over a plane; over a sphere of `radius_km` 90° plus the dip
-/// acos(r / (r + h)), 0.001° for the lowest observer.
-pub fn horizon_zenith_deg(geometry: Geometry, radius_km: f64, altitude_km: f64) -> f64 {
-    match geometry {
-        Geometry::PlaneParallel => 90.0,
-        Geometry::Spherical => 90.0 + libm::acos(radius_km / (radius_km + altitude_km.max(MIN_OBSERVER_KM))).to_degrees(),
+/// Where an observer stands over the planet (as [`Medium::observer`] places
+/// it, at least [`MIN_OBSERVER_KM`] up): its horizon, and how far its rays
+/// below the horizon travel to the ground.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Standpoint {
+    pub geometry: Geometry,
+    pub radius_km: f64,
+    pub altitude_km: f64,
+}
+
+impl Standpoint {
+    pub fn new(geometry: Geometry, radius_km: f64, altitude_km: f64) -> Standpoint {
+        Standpoint { geometry, radius_km, altitude_km: altitude_km.max(MIN_OBSERVER_KM) }
+    }
+
+    /// The zenith angle of the horizon, degrees: beyond it rays meet the
+    /// ground. 90° over a plane; over a sphere of radius R, 90° plus the dip
+    /// acos(R / (R + h)), 0.001° for the lowest observer.
+    pub fn horizon_zenith_deg(&self) -> f64 {
+        match self.geometry {
+            Geometry::PlaneParallel => 90.0,
+            Geometry::Spherical => 90.0 + libm::acos(self.radius_km / (self.radius_km + self.altitude_km)).to_degrees(),
+        }
+    }
+
+    /// The distance to the ground along the ray at `zenith_deg`, km; `None`
+    /// for a ray that misses it. Over a sphere, with r = R + h and α the
+    /// angle from the nadir, the near root of |p + t d| = R:
+    /// t = r cos α − √(r² cos² α − h (2R + h)), computed as
+    /// h (2R + h) / (r cos α + √(…)) (the roots' product over the far one)
+    /// so that a low observer's few metres are not the difference of two
+    /// thousands of kilometres.
+    pub fn ground_distance_km(&self, zenith_deg: f64) -> Option<f64> {
+        let cos_nadir = -zenith_deg.to_radians().cos();
+        let h = self.altitude_km;
+        match self.geometry {
+            Geometry::PlaneParallel => (cos_nadir > 0.0).then(|| h / cos_nadir),
+            Geometry::Spherical => {
+                let r = self.radius_km + h;
+                let c = h * (2.0 * self.radius_km + h);
+                let disc = (r * cos_nadir).powi(2) - c;
+                (cos_nadir > 0.0 && disc >= 0.0).then(|| c / (r * cos_nadir + disc.sqrt()))
+            }
+        }
+    }
+
+    /// The zenith angle, degrees, of the ray that meets the ground
+    /// `distance_km` away (from the altitude at the nadir to the horizon's
+    /// distance): the inverse of [`Standpoint::ground_distance_km`]. Over a
+    /// sphere, by the law of cosines: cos α = (r² + t² − R²) / (2 r t).
+    pub fn zenith_for_ground_distance_deg(&self, distance_km: f64) -> f64 {
+        let h = self.altitude_km;
+        let t = distance_km.max(h);
+        let cos_nadir = match self.geometry {
+            Geometry::PlaneParallel => h / t,
+            Geometry::Spherical => (h * (2.0 * self.radius_km + h) + t * t) / (2.0 * (self.radius_km + h) * t),
+        };
+        180.0 - libm::acos(cos_nadir.clamp(-1.0, 1.0)).to_degrees()
     }
 }
 
@@ -125,9 +175,9 @@ impl Medium {
         }
     }
 
-    /// [`horizon_zenith_deg`] for this medium's planet.
-    pub fn horizon_zenith_deg(&self, altitude_km: f64) -> f64 {
-        horizon_zenith_deg(self.geometry, self.radius_km, altitude_km)
+    /// The [`Standpoint`] of an observer at `altitude_km` over this medium's planet.
+    pub fn standpoint(&self, altitude_km: f64) -> Standpoint {
+        Standpoint::new(self.geometry, self.radius_km, altitude_km)
     }
 
     /// The local vertical at `p`.
