@@ -5,7 +5,10 @@
 //! models, the LUT mappings, the spectra and tables, Cargo.lock), so that
 //! caches of rendered slices and farm workers tell builds of different
 //! physics apart even under one version number, while builds of the same
-//! source on different machines agree.
+//! source on different machines agree. `SKY_MS_GRID_SOURCE` names the same
+//! way the bake's resampling of multiple scattering from a grid
+//! (`src/bake/ms_grid.rs`), which a slice from a grid depends on too (and a
+//! farm worker does not run).
 
 use std::path::{Path, PathBuf};
 
@@ -25,10 +28,11 @@ fn files(path: &Path, out: &mut Vec<PathBuf>) {
 }
 
 /// 128 bits of two FNV-1a 64-bit hashes (different offsets) over each
-/// file's path and content: a change detector, not a cryptographic hash.
-fn render_source_hash() -> String {
+/// file's path and content of `sources`: a change detector, not a
+/// cryptographic hash.
+fn source_hash(sources: &[&str]) -> String {
     let mut all = Vec::new();
-    for s in RENDER_SOURCES {
+    for s in sources {
         println!("cargo:rerun-if-changed={s}");
         files(Path::new(s), &mut all);
     }
@@ -56,7 +60,8 @@ fn render_source_hash() -> String {
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let proto = "proto/sky/farm/v1/farm.proto";
     println!("cargo:rerun-if-changed={proto}");
-    println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", render_source_hash());
+    println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
+    println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
     let fds = protox::compile([proto], ["proto"])?;
     tonic_prost_build::configure().build_client(true).build_server(true).compile_fds(fds)?;
     Ok(())

@@ -149,7 +149,8 @@ pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, to
 pub fn sky_slice_key(atmosphere_hash: &str, spectral: &SpectralSettings, view: &View, quality: Quality, sampling: &Sampling) -> String {
     match sampling.ms_grid {
         None => slice_key(atmosphere_hash, spectral, view, quality.name()),
-        Some([rows, cols]) => slice_key(atmosphere_hash, spectral, view, &format!("{} ms_grid {rows}x{cols}", quality.name())),
+        // The grid's layout and resampling named by their source.
+        Some([rows, cols]) => slice_key(atmosphere_hash, spectral, view, &format!("{} ms_grid {rows}x{cols} {}", quality.name(), env!("SKY_MS_GRID_SOURCE"))),
     }
 }
 
