@@ -267,14 +267,14 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
     check_progress(&bake(&plain, "plain"));
     let events = bake(&grid, "grid");
     check_progress(&events);
-    // 6 x 5 nodes over the sky and 2 x 5 under it, for each of 64 slices
-    // (63 distinct): none taken from the plain bake's slices, while its fog
-    // slices (which the grid does not touch) all are.
+    // 6 x 5 nodes over the sky, 2 x 5 under it and the sun patch's 8 x 7,
+    // for each of 64 slices (63 distinct): none taken from the plain bake's
+    // slices, while its fog slices (which the grid does not touch) all are.
     let planned = find(&events, "planned");
-    assert_eq!((planned["fog_slices"].as_u64(), planned["texels_to_render"].as_u64()), (Some(0), Some(64 * 40)), "{planned}");
+    assert_eq!((planned["fog_slices"].as_u64(), planned["texels_to_render"].as_u64()), (Some(0), Some(64 * 96)), "{planned}");
     assert_eq!(find(&events, "forecast")["from"], "pilots");
     let last = find(&events, "progress");
-    assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(64 * 40), Some(64 * 40)), "{last}");
+    assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(64 * 96), Some(64 * 96)), "{last}");
     let again = bake(&grid, "grid2");
     assert_eq!(find(&again, "planned")["slices_cached"].as_u64(), Some(128), "every sky and fog slice");
     assert_eq!(std::fs::read(tmp.path().join("grid/clear.ktx2")).unwrap(), std::fs::read(tmp.path().join("grid2/clear.ktx2")).unwrap());
@@ -670,8 +670,10 @@ fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
 /// `sky bench bake --coarse-ms --coarse-ms-grid` measures multiple
 /// scattering interpolated from every --stride-th texel and from a grid of
 /// its own on the tiny bake's clear sky: cells are measured, the figures
-/// are finite, and the projected cost with either grid is below the plain
-/// one (only the sampling shrinks); bad flag combinations are usage errors.
+/// are finite, the projected cost from the LUT's own texels is not above
+/// the plain one (only the sampling shrinks), the own grid is priced by its
+/// nodes (with its sun patch, more than the tiny slice's texels); bad flag
+/// combinations are usage errors.
 #[test]
 fn bench_bake_measures_coarse_multiple_scattering() {
     let tmp = tempfile::tempdir().unwrap();
@@ -690,18 +692,18 @@ fn bench_bake_measures_coarse_multiple_scattering() {
             let v = m[k].as_f64().unwrap_or(f64::NAN);
             assert!(v.is_finite() && v >= 0.0, "{k}: {r}");
         }
-        let f = g["sampled_fraction"].as_f64().unwrap();
-        assert!(f > 0.0 && f < 1.0, "{r}");
         for k in ["slice_core_seconds_to_target", "slice_core_seconds_capped"] {
             let (c, p) = (g[k].as_f64().unwrap(), slice[k].as_f64().unwrap());
-            assert!(c > 0.0 && c < p, "{k}: {c} against {p}");
+            // Not above the plain cost (equal where the timed sampling is
+            // lost in the per-texel overhead, as on a loaded machine).
+            assert!(c > 0.0 && (c <= p || g["grid"] == "own 4x5"), "{k}: {c} against {p}");
         }
     }
     // The lut grid: a quarter of the 4 x 16 texels; the own one, as the
-    // bake's `ms_grid` renders it: 4 x 5 nodes above the horizon and 2 x 5
-    // below, of 64 texels.
+    // bake's `ms_grid` renders it: 4 x 5 nodes above the horizon, 2 x 5
+    // below and the sun patch's 8 x 7, of 64 texels.
     assert_eq!(grids[0]["sampled_fraction"].as_f64(), Some(0.25));
-    assert_eq!(grids[1]["sampled_fraction"].as_f64(), Some(30.0 / 64.0));
+    assert_eq!(grids[1]["sampled_fraction"].as_f64(), Some(86.0 / 64.0));
     let totals: Vec<&serde_json::Value> = r["coarse_ms"].as_array().unwrap().iter().filter(|c| c["sky"] == "total").collect();
     assert_eq!(totals.len(), 2, "{r}");
     assert!(totals[0]["core_hours"].as_f64().unwrap() < r["total_core_hours"][0][1].as_f64().unwrap(), "{r}");
