@@ -413,10 +413,10 @@ mod tests {
         // The sky rows' zenith angles, and the ground rows' distances.
         let sky_rows: Vec<f64> = (0..9).map(|j| g.node_deg(j * 7, (60.0, 0.0)).0).collect();
         let (near, far) = (g.standpoint.altitude_km, g.standpoint.ground_distance_km(horizon + HORIZON_MARGIN_DEG).unwrap());
-        // By the zenith, between the sky's last two rows, between its last
-        // row and the horizon; under it, a ground texel by the horizon (60 m
-        // away from 1 mm up), and farther down.
-        // The sun high, far from these directions.
+        // The sun high, far from these directions: by the zenith, between
+        // the sky's last two rows, between its last row and the horizon;
+        // under it, a ground texel by the horizon (60 m away from 1 mm up),
+        // and farther down.
         let sun = (60.0, sun_az);
         for (z, a) in [(10.0, 5.0), (45.0, 100.0), (89.95, 170.0), (90.0005, 20.0), (90.0012, 30.0), (90.05, 60.0), (135.0, 179.0), (179.5, 0.0)] {
             let d = direction_deg(z, sun_az + a);

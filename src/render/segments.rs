@@ -165,10 +165,10 @@ impl Medium {
     }
 
     /// A point at `altitude_km` above the origin of the horizontal plane
-    /// (at least [`MIN_OBSERVER_KM`], so rays looking down meet the ground
-    /// ahead of them).
+    /// (at least [`MIN_OBSERVER_KM`], as its [`Standpoint`] has it, so rays
+    /// looking down meet the ground ahead of them).
     pub fn observer(&self, altitude_km: f64) -> DVec3 {
-        let altitude_km = altitude_km.max(MIN_OBSERVER_KM);
+        let altitude_km = self.standpoint(altitude_km).altitude_km;
         match self.geometry {
             Geometry::Spherical => DVec3::new(0.0, 0.0, self.radius_km + altitude_km),
             Geometry::PlaneParallel => DVec3::new(0.0, 0.0, altitude_km),
