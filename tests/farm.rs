@@ -709,7 +709,7 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
         let want = sky::render::render(&sessions[*k].scene, v, &AtomicBool::new(false), &|| {}).unwrap();
         assert!(image_of_columns(columns, v.width, v.height) == want, "a part of atmosphere {k} differs from its direct render");
     }
-    assert!(out.busy_s.iter().all(|&s| s > 0.0), "{:?}", out.busy_s);
+    assert!(out.busy_core_s.iter().all(|&s| s > 0.0), "{:?}", out.busy_core_s);
     assert_eq!(out.stats.columns_total, 24);
     for w in &out.stats.workers {
         assert_eq!((w.connects, w.hellos), (1, 1), "{w:?}");

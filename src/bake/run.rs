@@ -81,7 +81,9 @@ pub struct BakeOptions {
     /// The workers (the embedded one: `WorkerSpec::Local`).
     pub workers: Vec<WorkerSpec>,
     pub farm: Options,
-    /// The cores the workers have in all, for the cost in core-seconds.
+    /// The cores the workers have in all, for the cost in core-seconds,
+    /// as far as known before the farm's workers say theirs in their Hello
+    /// (which then counts).
     pub cores: usize,
     /// Only these slices (none: every slice of every basis sky).
     pub only: Option<Vec<SliceId>>,
@@ -210,7 +212,8 @@ impl Tracker {
         self.prep_s += planning_s;
         self.planning = false;
         self.forecast_total = Some(total);
-        self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * self.cores as f64 });
+        // Pilots and probes render on this process's threads.
+        self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * rayon::current_num_threads() as f64 });
     }
 
     /// Progress with `in_job` texels of the current queue done; the slice
@@ -504,11 +507,18 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 // A render's cost is a part per render and per texel (the
                 // job, the first-collision guide, single scattering) and a
                 // part per sample: the pilot and a one-sample render of the
-                // same view tell them apart.
+                // same view tell them apart. Rendered here, on this process's
+                // threads, in one piece, as the probes below are: on a farm a
+                // pilot's few columns go out as several small tasks, each
+                // preparing its sun's tracers and guides again, which the
+                // slices' large tasks spread thin (a grid's pilot, 316 nodes
+                // of 32 samples, is of the size of that preparation). Its
+                // pixels are the very ones the farm would return.
+                let threads = rayon::current_num_threads() as f64;
                 let timed = |v: &View| -> Result<(Image, f64), BakeError> {
                     let t = Instant::now();
-                    let r = session.render_view(v, cancel.clone()).map_err(|source| BakeError::Render { sky: p.out.sky.name.clone(), index, source })?;
-                    Ok((r.image, t.elapsed().as_secs_f64() * opts.cores as f64))
+                    let image = crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+                    Ok((image, t.elapsed().as_secs_f64() * threads))
                 };
                 let (image, pilot_core_s) = timed(&pilot)?;
                 let (_, one_core_s) = timed(&View { spp: 1, ..pilot.clone() })?;
@@ -662,17 +672,20 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         }
         let start = Instant::now();
         let outcome = farm.render_parts(parts, cancel.clone()).map_err(|source| queue_error(&queued, source))?;
-        let core_seconds = start.elapsed().as_secs_f64() * opts.cores as f64;
+        // The farm's threads, from its workers' Hello (the embedded worker's
+        // own where there is no farm).
+        let threads = if outcome.stats.threads > 0 { outcome.stats.threads } else { opts.cores };
+        let core_seconds = start.elapsed().as_secs_f64() * threads as f64;
         for q in &queued {
             let _ = std::fs::remove_file(&q.journal);
         }
         // The render's cost shared by the jobs in proportion to the time
         // their tasks took on the workers (a cloudy column costs several
         // clear ones).
-        let busy_total: f64 = outcome.busy_s.iter().sum();
-        for ((q, columns), busy_s) in queued.iter().zip(&outcome.parts).zip(&outcome.busy_s) {
+        let busy_total: f64 = outcome.busy_core_s.iter().sum();
+        for ((q, columns), busy) in queued.iter().zip(&outcome.parts).zip(&outcome.busy_core_s) {
             let image = crate::session::image_of_columns(columns, q.view.width, q.view.height);
-            let cost = if busy_total > 0.0 { core_seconds * busy_s / busy_total } else { 0.0 };
+            let cost = if busy_total > 0.0 { core_seconds * busy / busy_total } else { 0.0 };
             match &q.kind {
                 JobKind::Strip => strips[q.k] = Some(StripOutcome { image, core_seconds: cost, resumed: q.resumed }),
                 JobKind::Grid(index) => {
@@ -858,6 +871,12 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
         match e {
             FarmEvent::Progress(_) if t.planning => {}
             FarmEvent::Progress(p) => {
+                // The farm's threads, once its workers said them: what the
+                // forecast's core-seconds are shared among.
+                let threads: usize = p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).sum();
+                if threads > 0 {
+                    t.cores = threads;
+                }
                 let p = t.progress(p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));
             }

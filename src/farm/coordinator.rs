@@ -228,9 +228,9 @@ impl Farm {
             return Err(e);
         }
         let stats = sched.snapshot();
-        let busy_s = sched.busy_s();
+        let busy_core_s = sched.busy_core_s();
         match sched.take_columns() {
-            Some(parts) => Ok(PartsOutcome { parts, busy_s, stats }),
+            Some(parts) => Ok(PartsOutcome { parts, busy_core_s, stats }),
             None => Err(FarmError::NoWorkers { report: sched.report() }),
         }
     }
@@ -259,9 +259,15 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
         }
         // Be connected, agree on versions and not be paused before taking work.
         let ready = backend.ready(&opts, &traffic).await;
-        if let (false, Some(n)) = (named, backend.hello_name()) {
-            // Unnamed in the farm file: the worker's own --name.
-            shared.sched.lock().unwrap().workers[w].name = n.to_string();
+        {
+            let mut s = shared.sched.lock().unwrap();
+            if let (false, Some(n)) = (named, backend.hello_name()) {
+                // Unnamed in the farm file: the worker's own --name.
+                s.workers[w].name = n.to_string();
+            }
+            if let Some(t) = backend.threads() {
+                s.workers[w].threads = t;
+            }
         }
         match ready {
             Ok(None) => backoff = Duration::from_millis(500),

@@ -108,6 +108,9 @@ pub(crate) struct WState {
     pub columns_done: u64,
     /// Columns per second, smoothed.
     pub speed: Option<f64>,
+    /// Its render threads, once known (the embedded worker's, a remote's
+    /// Hello); 0 before.
+    pub threads: usize,
     pub quarantined: Option<String>,
     /// Pixels of the current task finished so far (from heartbeats).
     pub inflight_pixels: Arc<AtomicU64>,
@@ -127,6 +130,7 @@ impl WState {
             tasks_done: 0,
             columns_done: 0,
             speed: None,
+            threads: 0,
             quarantined,
             inflight_pixels: Arc::new(AtomicU64::new(0)),
             preparing: Arc::new(AtomicBool::new(false)),
@@ -155,8 +159,9 @@ struct Part {
     offset: u32,
     width: u32,
     journal: Option<Journal>,
-    /// Seconds its winning tasks ran on their workers, in all.
-    busy_s: f64,
+    /// Core-seconds its winning tasks took on their workers, in all: each
+    /// task's seconds times its worker's threads.
+    busy_core_s: f64,
 }
 
 /// One render's scheduling state: the columns of one or more jobs (parts)
@@ -192,7 +197,7 @@ impl Sched {
                 let offset = columns.len() as u32;
                 let width = p.columns.len() as u32;
                 columns.extend(p.columns);
-                Part { job_hash: p.job_hash, height: p.height, lines: p.lines, offset, width, journal: p.journal, busy_s: 0.0 }
+                Part { job_hash: p.job_hash, height: p.height, lines: p.lines, offset, width, journal: p.journal, busy_core_s: 0.0 }
             })
             .collect();
         let width = columns.len() as u32;
@@ -231,10 +236,10 @@ impl Sched {
         self.parts.iter().map(|p| p.width as u64 * p.height as u64).sum()
     }
 
-    /// Seconds each part's winning tasks ran on their workers, in all (a
-    /// basis of sharing a render's cost among its parts).
-    pub fn busy_s(&self) -> Vec<f64> {
-        self.parts.iter().map(|p| p.busy_s).collect()
+    /// Core-seconds each part's winning tasks took on their workers, in
+    /// all (a basis of sharing a render's cost among its parts).
+    pub fn busy_core_s(&self) -> Vec<f64> {
+        self.parts.iter().map(|p| p.busy_core_s).collect()
     }
 
     pub fn live_workers(&self) -> usize {
@@ -417,6 +422,8 @@ impl Sched {
             r.stop.send_replace(Stop::Lost);
         }
         let ws = &mut self.workers[w];
+        let task_core_s = now.saturating_sub(started).as_secs_f64() * ws.threads.max(1) as f64;
+        self.stats.busy_core_s += task_core_s;
         ws.tasks_done += 1;
         ws.columns_done += task.count as u64;
         let rate = task.count as f64 / now.saturating_sub(started).as_secs_f64().max(1e-3);
@@ -427,7 +434,7 @@ impl Sched {
         match task.kind {
             Kind::Render => {
                 let k = self.part_of(task.first);
-                self.parts[k].busy_s += now.saturating_sub(started).as_secs_f64();
+                self.parts[k].busy_core_s += task_core_s;
                 let mut accepted = Vec::new();
                 for (i, col) in columns.into_iter().enumerate() {
                     let c = task.first + i as u32;
@@ -595,6 +602,7 @@ impl Sched {
     pub fn snapshot(&self) -> Stats {
         let mut s = self.stats.clone();
         s.columns_total = self.width;
+        s.threads = self.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).sum();
         s.workers = self
             .workers
             .iter()
@@ -605,6 +613,7 @@ impl Sched {
                 tasks_done: w.tasks_done,
                 columns_done: w.columns_done,
                 columns_per_s: w.speed.unwrap_or(0.0),
+                threads: w.threads,
                 failures: w.failures,
                 quarantined: w.quarantined.clone(),
                 connects: w.traffic.connects.load(Ordering::Relaxed),

@@ -29,6 +29,8 @@ pub struct WorkerStats {
     pub tasks_done: u64,
     pub columns_done: u64,
     pub columns_per_s: f64,
+    /// Render threads (0 while unknown: a remote worker before its Hello).
+    pub threads: usize,
     pub failures: usize,
     pub quarantined: Option<String>,
     /// Connections and Hellos made, and what was sent, in this render.
@@ -59,6 +61,12 @@ pub struct Stats {
     pub verify_mismatches: u32,
     /// Columns picked for verification that no second worker could take.
     pub columns_unverified: u32,
+    /// Core-seconds of the tasks the workers delivered: each task's seconds
+    /// on its worker times that worker's threads (a farm's cost, without
+    /// the coordinator's own work; lost and stopped tasks not counted).
+    pub busy_core_s: f64,
+    /// Render threads of the workers not quarantined, as far as known.
+    pub threads: usize,
     pub workers: Vec<WorkerStats>,
 }
 
@@ -72,9 +80,9 @@ pub struct Outcome {
 /// the figures of the whole.
 pub struct PartsOutcome {
     pub parts: Vec<Vec<Vec<PixelResult>>>,
-    /// Seconds each part's accepted tasks ran on their workers, in all:
-    /// what its share of the render's cost is measured by.
-    pub busy_s: Vec<f64>,
+    /// Core-seconds each part's accepted tasks took on their workers, in
+    /// all: what its share of the render's cost is measured by.
+    pub busy_core_s: Vec<f64>,
     pub stats: Stats,
 }
 

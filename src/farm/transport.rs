@@ -35,6 +35,8 @@ pub(crate) enum Backend {
         client: Option<Client>,
         held: HashSet<String>,
         hello_name: Option<String>,
+        /// Render threads, from its Hello.
+        hello_threads: Option<usize>,
         greeted: bool,
     },
 }
@@ -87,14 +89,14 @@ impl Backend {
                 let pool = rayon::ThreadPoolBuilder::new().num_threads(*threads).build().map_err(|e| format!("cannot start {threads} threads: {e}"))?;
                 Backend::Local { pool: Arc::new(pool) }
             }
-            WorkerSpec::Remote { uri, .. } => Backend::Remote { uri: uri.clone(), client: None, held: HashSet::new(), hello_name: None, greeted: false },
+            WorkerSpec::Remote { uri, .. } => Backend::Remote { uri: uri.clone(), client: None, held: HashSet::new(), hello_name: None, hello_threads: None, greeted: false },
         })
     }
 
     /// Ok(None) when ready, Ok(Some(reason)) when paused. Connects and says
     /// Hello only when not connected and greeted already.
     pub async fn ready(&mut self, opts: &Options, traffic: &Traffic) -> Result<Option<String>, TaskError> {
-        let Backend::Remote { uri, client, held, hello_name, greeted } = self else { return Ok(None) };
+        let Backend::Remote { uri, client, held, hello_name, hello_threads, greeted } = self else { return Ok(None) };
         if client.is_some() && *greeted {
             return Ok(None);
         }
@@ -121,6 +123,7 @@ impl Backend {
             Ok(Ok(r)) => r.into_inner(),
         };
         *hello_name = Some(reply.name.clone());
+        *hello_threads = Some(reply.threads as usize);
         *held = reply.optics_held.iter().cloned().collect();
         if reply.protocol_version != PROTOCOL_VERSION {
             return Err(TaskError::Refused(format!("worker {} at {uri} speaks farm protocol {}, this coordinator {PROTOCOL_VERSION}", reply.name, reply.protocol_version)));
@@ -162,6 +165,15 @@ impl Backend {
         match self {
             Backend::Remote { hello_name, .. } => hello_name.as_deref(),
             Backend::Local { .. } => None,
+        }
+    }
+
+    /// The threads it renders on: the embedded worker's pool, a remote
+    /// worker's Hello (None before it).
+    pub fn threads(&self) -> Option<usize> {
+        match self {
+            Backend::Remote { hello_threads, .. } => *hello_threads,
+            Backend::Local { pool } => Some(pool.current_num_threads()),
         }
     }
 

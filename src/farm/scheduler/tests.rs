@@ -352,7 +352,7 @@ fn parts_share_one_queue_and_no_task_spans_two() {
     assert_eq!(seen.iter().filter(|&&(p, _, _)| p == 1).map(|&(_, _, n)| n).sum::<u32>(), 4, "{seen:?}");
     s.finish(0, held.id, cols(0, 1, 0.0), t(clock + 1.0));
     assert!(s.complete());
-    let busy = s.busy_s();
+    let busy = s.busy_core_s();
     assert!(busy[0] > busy[1] && busy[1] > 0.0, "{busy:?}");
     let parts = s.take_columns().unwrap();
     assert_eq!(parts.iter().map(Vec::len).collect::<Vec<_>>(), vec![5, 4]);
@@ -377,4 +377,27 @@ fn a_failed_column_is_named_in_its_part() {
         Some(FarmError::ColumnFailed { part: 1, column: 0, workers: 2, .. }) => {}
         other => panic!("{other:?}"),
     }
+}
+
+/// A task's cost is its seconds times its worker's threads: the same
+/// seconds on a 4-thread worker cost four times a 1-thread worker's, and
+/// the render's threads are those of the workers not quarantined.
+#[test]
+fn busy_core_seconds_weigh_tasks_by_their_workers_threads() {
+    let opts = Options { max_batch: 1, verify_fraction: 0.0, ..Options::default() };
+    let mut s = sched(2, 2, opts);
+    s.workers[0].threads = 4;
+    s.workers[1].threads = 1;
+    let a = task(s.assign(0, t(0.0)));
+    let b = task(s.assign(1, t(0.0)));
+    s.finish(0, a.id, honest(&a), t(2.0));
+    s.finish(1, b.id, honest(&b), t(2.0));
+    assert!(s.complete());
+    assert!((s.busy_core_s()[0] - 10.0).abs() < 1e-9, "{:?}", s.busy_core_s());
+    let stats = s.snapshot();
+    assert!((stats.busy_core_s - 10.0).abs() < 1e-9, "{}", stats.busy_core_s);
+    assert_eq!(stats.threads, 5);
+    assert_eq!(stats.workers.iter().map(|w| w.threads).collect::<Vec<_>>(), vec![4, 1]);
+    s.quarantine(1, "test".into());
+    assert_eq!(s.snapshot().threads, 4);
 }
