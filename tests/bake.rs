@@ -301,6 +301,58 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
     assert!(ratios.len() > 3000 && median.abs() < 0.05, "{} texels, median relative difference {median}", ratios.len());
 }
 
+/// The Shadowed Fog rendered at a size of its own (`fog_ms_size`) and
+/// resampled to the Fog LUT's: the LUTs keep their size, only the smaller
+/// renders are planned, and the Fog and the Shadowed Fog decode as the
+/// whole renders' within the noise (Rayleigh air, whose multiple scattering
+/// is smooth; u and v swapped, or a resampling off by a texel, would miss
+/// the Shadowed Fog's rise toward the horizon by far more).
+#[test]
+fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
+    let tmp = tempfile::tempdir().unwrap();
+    let atmosphere = root().join("tests/atmospheres/disort_rayleigh.toml");
+    let write = |name: &str, extra: &str| {
+        let bake = tmp.path().join(name);
+        let text = format!("[quality.draft]\nband_nm = 40.0\nspp = 128\n{extra}\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 2\nheight = 4\n[fog]\nwidth = 8\nheight = 8\n");
+        std::fs::write(&bake, text).unwrap();
+        bake
+    };
+    let (whole, small) = (write("whole.toml", ""), write("small.toml", "fog_ms_size = \"5x8\""));
+    let cache = tmp.path().join("cache");
+    let bake = |file: &Path, out: &str| {
+        let args = ["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"];
+        let o = sky(&args, tmp.path());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+        events.into_iter().find(|e| e["event"] == "planned").expect("a planned event")
+    };
+    let planned = bake(&whole, "whole");
+    let fog_slices = planned["fog_slices"].as_u64().unwrap();
+    assert!(fog_slices > 60, "{planned}");
+    // The sky's slices come from the cache; the fog's render at 5 x 8 (at 5 x 4, a
+    // third of its rows, the Shadowed Fog's steep rise toward the horizon came
+    // out 24 % bright: the size must be measured).
+    let planned = bake(&small, "small");
+    assert_eq!((planned["fog_slices"].as_u64(), planned["texels_to_render"].as_u64()), (Some(fog_slices), Some(fog_slices * 40)), "{planned}");
+    let load = |dir: &str| sky::lut::decode::Luts::load(&tmp.path().join(dir).join("manifest.json")).unwrap();
+    let (a, b) = (load("small"), load("whole"));
+    let f = a.manifest.fog.as_ref().expect("a fog entry");
+    assert_eq!((f.width, f.height), (8, 8));
+    for occlusion in [0.0, 1.0] {
+        let mut ratios = Vec::new();
+        for elevation_sun in [40.0, 20.0, 5.0, 1.0] {
+            for (zenith, azimuth) in [(10.0, 0.0), (45.0, 60.0), (70.0, 120.0), (85.0, 20.0), (88.0, 170.0), (89.5, 90.0)] {
+                let d = sky::render::camera::direction_deg(zenith, azimuth);
+                let get = |l: &sky::lut::decode::Luts| l.fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, occlusion).unwrap().inscatter_rgb[1];
+                ratios.push(get(&a) / get(&b) - 1.0);
+            }
+        }
+        ratios.sort_by(f64::total_cmp);
+        let median = ratios[ratios.len() / 2];
+        assert!(median.abs() < 0.1, "cloud occlusion {occlusion}: median relative difference {median} ({ratios:?})");
+    }
+}
+
 /// A texel that is not finite is a bake error naming the basis sky, the
 /// slice and the texel (here planted in a cached slice), reported in the
 /// `--json` summary too, and nothing is written.
@@ -361,7 +413,7 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
 
     // The decoded sun against the table computed here from the same optics.
     let atm = sky::atmosphere::Atmosphere::load(&atm_path).unwrap();
-    let spectral = sky::bake::run::spectral_settings(&sky::bake::Sampling { band_nm: 20.0, spp: 1, max_rel_error: None, ms_grid: None });
+    let spectral = sky::bake::run::spectral_settings(&sky::bake::Sampling { band_nm: 20.0, spp: 1, max_rel_error: None, ms_grid: None, fog_ms_size: None });
     let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
     let table = sky::lut::transmittance::TransmittanceTable::compute(&scene);
     let m = sky::lut::colour::ColourSpace::Rec709.xyz_to_rgb();

@@ -13,6 +13,8 @@
 //! max_rel_error = 0.01       # adaptive: stop at this standard error of Y
 //! ms_grid = "16x13"          # optional: multiple scattering on a grid of its own
 //!                            # (rows x azimuths), interpolated (bake::ms_grid)
+//! fog_ms_size = "16x16"      # optional: the Shadowed Fog rendered at this size
+//!                            # (width x height) and resampled to the Fog LUT's
 //!
 //! [[sky]]                    # in the talk's order: clear, hazed, cloudy0 ... cloudy5
 //! name = "clear"
@@ -71,6 +73,12 @@ pub struct Sampling {
     /// ([`super::ms_grid`]); None: every texel rendered.
     #[serde(default)]
     pub ms_grid: Option<[usize; 2]>,
+    /// The Shadowed Fog (the fog slices' Monte Carlo: light scattered two
+    /// or more times) rendered at [width, height] texels of the Fog LUT's
+    /// mapping and resampled bilinearly in (u, v) to the LUT's size
+    /// ([`super::fog::resample_shadowed`]); None: at the LUT's size.
+    #[serde(default)]
+    pub fog_ms_size: Option<[usize; 2]>,
 }
 
 /// One basis sky of a bake.
@@ -165,6 +173,7 @@ struct RawSampling {
     spp: Option<S<i64>>,
     max_rel_error: Option<S<f64>>,
     ms_grid: Option<S<String>>,
+    fog_ms_size: Option<S<String>>,
 }
 
 #[derive(Deserialize)]
@@ -186,8 +195,8 @@ struct RawSky {
 /// rounding error (about 1 %).
 pub fn default_sampling(q: Quality) -> Sampling {
     match q {
-        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None },
-        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None },
+        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None },
+        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None, fog_ms_size: None },
     }
 }
 
@@ -242,6 +251,12 @@ impl Ctx<'_> {
             match parse_grid(g.get_ref()) {
                 Some(grid) => s.ms_grid = Some(grid),
                 None => self.err(g, format!("{what}.ms_grid: expected \"ROWSxCOLUMNS\", each from 2 to 1024 (e.g. \"16x13\"), got {:?}", g.get_ref())),
+            }
+        }
+        if let Some(g) = &raw.fog_ms_size {
+            match parse_grid(g.get_ref()) {
+                Some(size) => s.fog_ms_size = Some(size),
+                None => self.err(g, format!("{what}.fog_ms_size: expected \"WIDTHxHEIGHT\", each from 2 to 1024 (e.g. \"16x16\"), got {:?}", g.get_ref())),
             }
         }
         s
@@ -393,13 +408,14 @@ mod tests {
         assert_eq!(b.skies.len(), 1);
         let s = &b.skies[0];
         assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
-        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None });
-        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None });
+        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None });
+        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None, fog_ms_size: None });
         assert_eq!(b.fog, FogSettings { ceiling_km: 3.0, width: 32, height: 32 });
         let b = parse("[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[fog]\nceiling_km = 2.5\nwidth = 8\nheight = 4\n").unwrap();
         assert_eq!(b.fog, FogSettings { ceiling_km: 2.5, width: 8, height: 4 });
-        let b = parse("[quality.final]\nms_grid = \"16x13\"\n[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n").unwrap();
+        let b = parse("[quality.final]\nms_grid = \"16x13\"\nfog_ms_size = \"16x8\"\n[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n").unwrap();
         assert_eq!((b.skies[0].final_.ms_grid, b.skies[0].draft.ms_grid), (Some([16, 13]), None));
+        assert_eq!((b.skies[0].final_.fog_ms_size, b.skies[0].draft.fog_ms_size), (Some([16, 8]), None));
     }
 
     #[test]

@@ -527,7 +527,9 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 // A fog slice's Fog is its render plus single scattering by
                 // quadrature; so is a slice from a grid, at every texel.
                 let quadrature = match (fog, p.grid) {
-                    (true, _) => super::fog::time_quadrature(&session.scene, view),
+                    // (the Fog's quadrature is at the LUT's size, whatever
+                    // size its Shadowed Fog renders at)
+                    (true, _) => super::fog::time_quadrature(&session.scene, view) * (bake.fog.width * bake.fog.height) as f64 / texels,
                     (false, Some(g)) => g.time_quadrature(&session.scene, &p.views[index].as_ref().expect("to render").0),
                     (false, None) => 0.0,
                 };
@@ -1028,7 +1030,7 @@ mod tests {
     /// exactly the samples each texel of the adaptive render then takes.
     #[test]
     fn pilots_plan_every_texels_samples_exactly() {
-        let sampling = Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05), ms_grid: None };
+        let sampling = Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05), ms_grid: None, fog_ms_size: None };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let mut total = 0u64;
@@ -1057,7 +1059,7 @@ mod tests {
     /// scattering, or mirroring the grid the wrong way, misses by far more.
     #[test]
     fn a_slice_from_its_grid_agrees_with_the_slice_rendered_whole() {
-        let sampling = Sampling { band_nm: 40.0, spp: 512, max_rel_error: None, ms_grid: Some([16, 13]) };
+        let sampling = Sampling { band_nm: 40.0, spp: 512, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
@@ -1086,7 +1088,7 @@ mod tests {
     /// slice into the next, and with an adaptive sample count.
     #[test]
     fn a_strip_renders_each_slice_as_it_renders_alone() {
-        let sampling = Sampling { band_nm: 40.0, spp: 128, max_rel_error: Some(0.3), ms_grid: None };
+        let sampling = Sampling { band_nm: 40.0, spp: 128, max_rel_error: Some(0.3), ms_grid: None, fog_ms_size: None };
         let (atm, scene, sky) = test_sky(3, 8, &sampling);
         let cancel = AtomicBool::new(false);
         // Day, the sun-centred mapping's last slices, twilight.
