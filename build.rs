@@ -8,7 +8,9 @@
 //! source on different machines agree. `SKY_MS_GRID_SOURCE` names the same
 //! way the bake's resampling of multiple scattering from a grid
 //! (`src/bake/ms_grid.rs`), which a slice from a grid depends on too (and a
-//! farm worker does not run).
+//! farm worker does not run), and `SKY_FOG_RESAMPLE_SOURCE` the resampling
+//! of a Shadowed Fog rendered at a size of its own (`src/bake/fog_resample.rs`
+//! and the Fog LUT's mapping, `src/lut/fog.rs`).
 
 use std::path::{Path, PathBuf};
 
@@ -62,6 +64,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed={proto}");
     println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
     println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
+    println!("cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}", source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"]));
     let fds = protox::compile([proto], ["proto"])?;
     tonic_prost_build::configure().build_client(true).build_server(true).compile_fds(fds)?;
     Ok(())

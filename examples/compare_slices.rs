@@ -2,7 +2,12 @@
 //! slices two ways (a preset with `ms_grid` and the same without it, see
 //! README "Multiple scattering from a coarser grid"):
 //!
-//!   cargo run --release --example compare_slices -- CACHE_A CACHE_B [--blocks]
+//!   cargo run --release --example compare_slices -- CACHE_A CACHE_B [--blocks] [--resample]
+//!
+//! `--resample`: a slice of A smaller than B's at the same sun is resampled
+//! to B's size as a Shadowed Fog rendered at a size of its own is
+//! (`sky::bake::fog_resample::resample_shadowed`; README "The fog's multiple
+//! scattering at a smaller size").
 //!
 //! Slices are paired by sun zenith and size, and among those by the smaller
 //! median relative difference of Y (two basis skies at one sun differ by far
@@ -95,9 +100,10 @@ fn compare(a: &RenderedSlice, b: &RenderedSlice, blocks: bool) {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let blocks = args.iter().any(|a| a == "--blocks");
+    let resample = args.iter().any(|a| a == "--resample");
     let dirs: Vec<&String> = args.iter().filter(|a| !a.starts_with("--")).collect();
     let [a, b] = dirs[..] else {
-        eprintln!("usage: compare_slices CACHE_A CACHE_B [--blocks]");
+        eprintln!("usage: compare_slices CACHE_A CACHE_B [--blocks] [--resample]");
         std::process::exit(2);
     };
     let (sa, sb) = match (load(a), load(b)) {
@@ -108,8 +114,19 @@ fn main() {
         }
     };
     for x in &sa {
-        let partner =
-            sb.iter().filter(|y| (y.sun_zenith_deg - x.sun_zenith_deg).abs() < 1e-9 && (y.width, y.height) == (x.width, x.height)).min_by(|p, q| median_rel(x, p).total_cmp(&median_rel(x, q)));
+        // B's sizes at this sun that x is (or, resampled, becomes).
+        let sizes: Vec<(usize, usize)> = sb
+            .iter()
+            .filter(|y| (y.sun_zenith_deg - x.sun_zenith_deg).abs() < 1e-9)
+            .map(|y| (y.width, y.height))
+            .filter(|&(w, h)| (w, h) == (x.width, x.height) || (resample && w >= x.width && h >= x.height))
+            .collect();
+        let Some(&(w, h)) = sizes.iter().min() else { continue };
+        if (w, h) != (x.width, x.height) {
+            println!("(A's slice resampled from {} x {})", x.width, x.height);
+        }
+        let x = &sky::bake::fog_resample::resample_shadowed(x, w, h);
+        let partner = sb.iter().filter(|y| (y.sun_zenith_deg - x.sun_zenith_deg).abs() < 1e-9 && (y.width, y.height) == (w, h)).min_by(|p, q| median_rel(x, p).total_cmp(&median_rel(x, q)));
         if let Some(y) = partner {
             compare(x, y, blocks);
         }

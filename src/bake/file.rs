@@ -470,6 +470,9 @@ mod tests {
             // final bake only (README: measured against whole slices).
             let grid = if s.name.starts_with("cloudy") { None } else { Some([16, 13]) };
             assert_eq!((s.sampling(Quality::Final).ms_grid, s.sampling(Quality::Draft).ms_grid), (grid, None), "{}", s.name);
+            // And their Shadowed Fog at 16 x 16 (README: measured against whole fog slices).
+            let fog = if s.name.starts_with("cloudy") { None } else { Some([16, 16]) };
+            assert_eq!((s.sampling(Quality::Final).fog_ms_size, s.sampling(Quality::Draft).fog_ms_size), (fog, None), "{}", s.name);
         }
         // And the other shipped bakes parse.
         for f in ["bakes/demo.toml", "bakes/tiny.toml", "bakes/cost-probe.toml", "tests/bakes/tiny.toml"] {

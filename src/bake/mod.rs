@@ -9,6 +9,7 @@ pub mod bench_coarse;
 pub mod cache;
 pub mod file;
 pub mod fog;
+pub mod fog_resample;
 pub mod lighting;
 pub mod ms_grid;
 pub mod openjd;
