@@ -65,10 +65,11 @@ fn compare(a: &RenderedSlice, b: &RenderedSlice, blocks: bool) {
     }
     let (mean, rms, noise) = (mean / n, (sq / n).sqrt(), (noise / n).sqrt());
     println!(
-        "sun zenith {:.2}°, {} x {}: mean relative difference of Y {:+.2} %, RMS {:.2} % against a noise of {:.2} %, beyond it {:.2} %; core-seconds {:.1} and {:.1} ({:.1}x)",
+        "sun zenith {:.2}°, {} x {}, B's mean Y {:.4e}: mean relative difference of Y {:+.2} %, RMS {:.2} % against a noise of {:.2} %, beyond it {:.2} %; core-seconds {:.1} and {:.1} ({:.1}x)",
         a.sun_zenith_deg,
         a.width,
         a.height,
+        b.xyz.iter().map(|p| p[1]).sum::<f64>() / b.xyz.len().max(1) as f64,
         100.0 * mean,
         100.0 * rms,
         100.0 * noise,

@@ -617,9 +617,12 @@ fn a_slice_goes_only_into_the_cache() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("luts");
-    let s = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:5,hazed:63", "--json"], tmp.path()));
-    assert_eq!(s["rendered"], 2);
-    assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 2);
+    let s = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:5,hazed:63,clear:fog:5", "--json"], tmp.path()));
+    // The fog slice counts, with its cost, in the summary.
+    assert_eq!(s["rendered"], 3, "{s}");
+    let fog = s["slices"].as_array().unwrap().iter().find(|e| e["slice"] == "clear:fog:5").cloned().unwrap_or_else(|| panic!("no fog slice in {s}"));
+    assert!(fog["core_seconds"].as_f64().unwrap() > 0.0 && fog["texels"] == 64, "{fog}");
+    assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 3);
     assert!(!out.join("manifest.json").exists());
     let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
     assert_eq!(o.status.code(), Some(1));

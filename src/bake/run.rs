@@ -118,6 +118,9 @@ pub struct SkySlices {
     pub columns_resumed: u32,
     /// The sky's global-fog LUTs (None with `only`, like `lighting`).
     pub fog: Option<super::fog::SkyFog>,
+    /// With `only`: the fog slices rendered now (their Shadowed Fog), by
+    /// slice index, for the summary.
+    pub fog_rendered: Vec<(usize, RenderedSlice)>,
 }
 
 /// The spectral settings of a preset: hero-wavelength sampling, XYZ only.
@@ -406,6 +409,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             columns_resumed: 0,
             lighting: None,
             fog: None,
+            fog_rendered: Vec::new(),
         };
         let jobs = views.iter().map(|v| v.as_ref().map(|(v, _)| grid.map_or_else(|| v.clone(), |g| g.view(v)))).collect();
         plan.push(Planned { atm, bundle, out, views, grid, jobs, same_as });
@@ -832,6 +836,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     let (image, cost) = render(&f.view, f.index)?;
                     let slice = slice_of_image(&image, &f.view, &format!("{name} (shadowed fog)"), f.index, cost)?;
                     opts.cache.put(&f.key, &slice)?;
+                    out.fog_rendered.push((f.index, slice));
                     on_slice(j + 1, fog_plan[k].len());
                 }
             } else {

@@ -235,8 +235,12 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         }
         Err(e) => return failed(&e),
     };
-    let rendered: usize = skies.iter().map(|s| s.rendered).sum();
-    let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum();
+    // The sky's slices and the fog's, rendered now (a whole bake's fog, or
+    // the fog slices a part of a bake names).
+    let rendered: usize = skies.iter().map(|s| s.rendered + s.fog.as_ref().map_or(0, |f| f.rendered) + s.fog_rendered.len()).sum();
+    let fog_core_s: f64 = skies.iter().map(|s| s.fog.as_ref().map_or(0.0, |f| f.core_seconds) + s.fog_rendered.iter().map(|(_, f)| f.core_seconds).sum::<f64>()).sum();
+    // (+ 0.0: an empty sum is −0.0, which would print as "-0.000")
+    let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum::<f64>() + fog_core_s + 0.0;
     eprintln!("sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.3} core-hours when rendered", started.elapsed().as_secs_f64(), core_s / 3600.0);
     if !a.slice.is_empty() {
         // A part of a bake (a farm manager's task) fills the cache only.
@@ -245,6 +249,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
                 .iter()
                 .flat_map(|s| s.slices.iter().enumerate().filter_map(move |(i, r)| r.as_ref().map(|r| (s, i, r))))
                 .map(|(s, i, r)| serde_json::json!({ "slice": format!("{}:{i}", s.sky.name), "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() }))
+                .chain(skies.iter().flat_map(|s| s.fog_rendered.iter().map(move |(i, r)| serde_json::json!({ "slice": format!("{}:fog:{i}", s.sky.name), "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() }))))
                 .collect();
             outln!("{}", serde_json::json!({ "slices": slices, "rendered": rendered, "cache": opts.cache.dir() }));
         }
