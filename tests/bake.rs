@@ -15,6 +15,13 @@ fn sky(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(dir).env("SKY_CACHE_DIR", "off").output().unwrap()
 }
 
+/// A bake run with `--json-progress`: it succeeds, and these are its events.
+fn bake_events(args: &[&str], dir: &Path) -> Vec<serde_json::Value> {
+    let o = sky(args, dir);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect()
+}
+
 fn summary(o: &Output) -> serde_json::Value {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     serde_json::from_slice(&o.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&o.stdout)))
@@ -248,12 +255,7 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
     };
     let (plain, grid) = (write("plain.toml", ""), write("grid.toml", "ms_grid = \"6x5\""));
     let cache = tmp.path().join("cache");
-    let bake = |file: &Path, out: &str| {
-        let args = ["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--quality", "final", "--json-progress"];
-        let o = sky(&args, tmp.path());
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect::<Vec<serde_json::Value>>()
-    };
+    let bake = |file: &Path, out: &str| bake_events(&["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--quality", "final", "--json-progress"], tmp.path());
     let find = |events: &[serde_json::Value], name: &str| events.iter().rev().find(|e| e["event"] == name).cloned().unwrap_or_else(|| panic!("no {name} in {events:?}"));
     // Progress never goes back, also after the queue (the plain bake's fog
     // slices and the grid's resampling come after it), and every slice
@@ -320,10 +322,7 @@ fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
     let (whole, small) = (write("whole.toml", ""), write("small.toml", "fog_ms_size = \"5x8\""));
     let cache = tmp.path().join("cache");
     let bake = |file: &Path, out: &str| {
-        let args = ["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"];
-        let o = sky(&args, tmp.path());
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+        let events = bake_events(&["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"], tmp.path());
         events.into_iter().find(|e| e["event"] == "planned").expect("a planned event")
     };
     let planned = bake(&whole, "whole");

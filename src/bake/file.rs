@@ -76,7 +76,7 @@ pub struct Sampling {
     /// The Shadowed Fog (the fog slices' Monte Carlo: light scattered two
     /// or more times) rendered at [width, height] texels of the Fog LUT's
     /// mapping and resampled bilinearly in (u, v) to the LUT's size
-    /// ([`super::fog::resample_shadowed`]); None: at the LUT's size.
+    /// ([`super::fog_resample::resample_shadowed`]); None: at the LUT's size.
     #[serde(default)]
     pub fog_ms_size: Option<[usize; 2]>,
 }

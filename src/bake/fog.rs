@@ -112,9 +112,8 @@ fn shadowed_view_and_key(
 
 /// The Fog LUT settings the Shadowed Fog of sampling `s` is rendered at:
 /// its `fog_ms_size` where set (then resampled by
-/// [`super::fog_resample::resample_shadowed`]),
-/// else the LUT's own.
-pub fn shadowed_settings(fog: &FogSettings, s: &Sampling) -> FogSettings {
+/// [`super::fog_resample::resample_shadowed`]), else the LUT's own.
+fn shadowed_settings(fog: &FogSettings, s: &Sampling) -> FogSettings {
     match s.fog_ms_size {
         Some([width, height]) => FogSettings { width, height, ..*fog },
         None => *fog,

@@ -30,7 +30,7 @@ use crate::mie::MieCache;
 use crate::render::camera::Camera;
 use crate::render::segments::Standpoint;
 use crate::render::tracer::Estimator;
-use crate::render::{adaptive, Image, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
+use crate::render::{adaptive, Image, Scene, SingleScatter, SpectralSettings, View, WavelengthSampling, ADAPTIVE_PILOT_SPP};
 use crate::session::{OpticsCache, Session, SharedFarm};
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -511,21 +511,13 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 // A render's cost is a part per render and per texel (the
                 // job, the first-collision guide, single scattering) and a
                 // part per sample: the pilot and a one-sample render of the
-                // same view tell them apart. Rendered here, on this process's
-                // threads, in one piece, as the probes below are: on a farm a
-                // pilot's few columns go out as several small tasks, each
-                // preparing its sun's tracers and guides again, which the
-                // slices' large tasks spread thin (a grid's pilot, 316 nodes
-                // of 32 samples, is of the size of that preparation). Its
-                // pixels are the very ones the farm would return.
-                let threads = rayon::current_num_threads() as f64;
-                let timed = |v: &View| -> Result<(Image, f64), BakeError> {
-                    let t = Instant::now();
-                    let image = crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
-                    Ok((image, t.elapsed().as_secs_f64() * threads))
-                };
-                let (image, pilot_core_s) = timed(&pilot)?;
-                let (_, one_core_s) = timed(&View { spp: 1, ..pilot.clone() })?;
+                // same view tell them apart. Rendered here in one piece, as
+                // the probes below are ([`timed_here`]; a grid's pilot, 316
+                // nodes of 32 samples, is of the size of a farm task's
+                // preparation); its pixels are the very ones the farm would
+                // return.
+                let (image, pilot_core_s) = timed_here(&session.scene, &pilot, &cancel)?;
+                let (_, one_core_s) = timed_here(&session.scene, &View { spp: 1, ..pilot.clone() }, &cancel)?;
                 let texels = (view.width * view.height) as f64;
                 let per_sample = ((pilot_core_s - one_core_s) / ((ADAPTIVE_PILOT_SPP - 1) as f64 * texels)).max(0.0);
                 // A fog slice's Fog is its render plus single scattering by
@@ -600,12 +592,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     // forecast came out 43 % high). The rest of a render's cost
                     // per render, not per texel, a one-texel render of the same
                     // view measures.
-                    let threads = rayon::current_num_threads() as f64;
-                    let timed = |v: &View| -> Result<f64, BakeError> {
-                        let t = Instant::now();
-                        crate::render::render(&session.scene, v, &cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
-                        Ok(t.elapsed().as_secs_f64() * threads)
-                    };
+                    let timed = |v: &View| timed_here(&session.scene, v, &cancel).map(|(_, core_s)| core_s);
                     let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
                     let texels = (probe.width * probe.height) as f64;
                     let whole = timed(&probe)?;
@@ -860,6 +847,16 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         done.push(out);
     }
     Ok(done)
+}
+
+/// Renders `view` on this process's threads in one piece: its image and
+/// cost in core-seconds (the wall time times the threads). How pilots and
+/// probes are timed: on a farm a small view's few columns would go out as
+/// several small tasks, each preparing its sun's tracers and guides again.
+fn timed_here(scene: &Scene, view: &View, cancel: &AtomicBool) -> Result<(Image, f64), BakeError> {
+    let start = Instant::now();
+    let image = crate::render::render(scene, view, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+    Ok((image, start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64))
 }
 
 /// The event of a slice found in the cache (or the same as an earlier one).

@@ -248,8 +248,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             let slices: Vec<_> = skies
                 .iter()
                 .flat_map(|s| s.slices.iter().enumerate().filter_map(move |(i, r)| r.as_ref().map(|r| (s, i, r))))
-                .map(|(s, i, r)| serde_json::json!({ "slice": format!("{}:{i}", s.sky.name), "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() }))
-                .chain(skies.iter().flat_map(|s| s.fog_rendered.iter().map(move |(i, r)| serde_json::json!({ "slice": format!("{}:fog:{i}", s.sky.name), "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() }))))
+                .map(|(s, i, r)| slice_json(format!("{}:{i}", s.sky.name), r))
+                .chain(skies.iter().flat_map(|s| s.fog_rendered.iter().map(move |(i, r)| slice_json(format!("{}:fog:{i}", s.sky.name), r))))
                 .collect();
             outln!("{}", serde_json::json!({ "slices": slices, "rendered": rendered, "cache": opts.cache.dir() }));
         }
@@ -367,4 +367,9 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
         outln!("{}", serde_json::json!({ "plan": "openjd", "template": path, "parameters": params_path, "render_tasks": tasks, "quality": quality.name(), "cache": cache }));
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// A slice a part of a bake rendered, for its `--json` summary.
+fn slice_json(slice: String, r: &bake::RenderedSlice) -> serde_json::Value {
+    serde_json::json!({ "slice": slice, "sun_zenith_deg": r.sun_zenith_deg, "texels": r.width * r.height, "core_seconds": r.core_seconds, "mean_samples": r.mean_samples() })
 }
