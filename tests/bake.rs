@@ -206,6 +206,24 @@ fn a_draft_forecasts_its_cost_from_probes() {
     let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
     assert!(at("forecast") < at("slice"));
     assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
+    // Planning reports each probe: the sky's and the fog's at 5 slices, of
+    // both skies, all before the forecast.
+    assert_planning_counts(&events, "probes", 2 * 2 * 5);
+}
+
+/// The `planning` events of a bake's `events`: `total` of them from
+/// `from`, counting 1 to `total`, each with an ETA, all before the
+/// forecast.
+fn assert_planning_counts(events: &[serde_json::Value], from: &str, total: u64) {
+    let planning: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "planning").collect();
+    assert_eq!(planning.len() as u64, total, "the first: {:?}", planning.first());
+    for (i, e) in planning.iter().enumerate() {
+        assert_eq!((e["from"].as_str(), e["done"].as_u64(), e["total"].as_u64()), (Some(from), Some(i as u64 + 1), Some(total)), "{e}");
+        assert!(e["eta_s"].as_f64().is_some_and(|s| s >= 0.0), "{e}");
+    }
+    assert_eq!(planning.last().unwrap()["eta_s"].as_f64(), Some(0.0));
+    let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
+    assert!(events.iter().rposition(|e| e["event"] == "planning").unwrap() < at("forecast"));
 }
 
 /// With adaptive sampling the forecast comes from pilots, the fog slices'
@@ -234,6 +252,9 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
     assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
     let last = events.iter().rev().find(|e| e["event"] == "progress").unwrap();
     assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(64 * 64 + 63 * 64), Some(64 * 64 + 63 * 64)), "{last}");
+    // A pilot for every distinct slice, sky and fog (63 of each: two
+    // slices share a sun), each reported.
+    assert_planning_counts(&events, "pilots", 63 + 63);
 }
 
 /// A preset with `ms_grid` renders each slice as its grid's nodes (a job

@@ -44,6 +44,11 @@ pub enum BakeEvent {
     /// pilots' pace); with a fixed sample count from probes (a few slices
     /// at a sixteenth of their texels, timed). `from`: "pilots" or "probes".
     Forecast { from: &'static str, core_seconds: f64, samples: u64, planning_core_seconds: f64 },
+    /// Planning's progress: one more pilot (or probe) of the forecast is
+    /// rendered, `done` of `total`, the last of slice `index` of `sky` (a
+    /// fog slice's if `fog`); `eta_s` for the rest of planning at its pace
+    /// so far.
+    Planning { from: &'static str, sky: String, index: usize, fog: bool, done: usize, total: usize, elapsed_s: f64, eta_s: f64 },
     /// One slice is done (rendered now, or found in the cache), with what
     /// it cost and, rendered now after a forecast, what was forecast.
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, forecast_core_seconds: Option<f64>, mean_samples: f64 },

@@ -219,6 +219,15 @@ impl Tracker {
         self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * rayon::current_num_threads() as f64 });
     }
 
+    /// One more pilot or probe (`from`) rendered, of slice `index` of
+    /// `sky` (a fog slice's if `fog`): `done` of `total`, planning having
+    /// begun at `start`.
+    fn planned_one(&self, from: &'static str, start: Instant, (sky, index, fog): (&str, usize, bool), (done, total): (usize, usize)) {
+        let elapsed_s = start.elapsed().as_secs_f64();
+        let eta_s = elapsed_s * total.saturating_sub(done) as f64 / done.max(1) as f64;
+        self.emit(BakeEvent::Planning { from, sky: sky.to_string(), index, fog, done, total, elapsed_s, eta_s });
+    }
+
     /// Progress with `in_job` texels of the current queue done; the slice
     /// they reach becomes the current one.
     fn progress(&mut self, in_job: u64, stalled: Option<String>) -> BakeProgress {
@@ -500,6 +509,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let start = Instant::now();
         tracker.lock().unwrap().planning = true;
         let (mut total, mut samples) = (0.0, 0u64);
+        let pilots = (0..plan.len()).filter(|&k| sessions[k].is_some()).flat_map(to_forecast).filter(|(_, v, _)| pilot_view(v).is_some()).count();
+        let mut piloted = 0;
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             for (index, view, fog) in to_forecast(k) {
@@ -536,6 +547,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 *after = quadrature;
                 total += *f + quadrature;
                 samples += planned;
+                piloted += 1;
+                tracker.lock().unwrap().planned_one("pilots", start, (&p.out.sky.name, index, fog), (piloted, pilots));
             }
         }
         tracker.lock().unwrap().forecast("pilots", start, total, samples);
@@ -549,6 +562,14 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         let start = Instant::now();
         tracker.lock().unwrap().planning = true;
         let (mut total, mut samples) = (0.0, 0u64);
+        // The probes to render: a sky's, and its fog's, at each of
+        // PROBE_SLICES that it has.
+        let has_probes = |k: usize, fog: bool| if fog { !fog_plan[k].is_empty() } else { plan[k].views.iter().any(Option::is_some) };
+        let probes: usize = (0..plan.len())
+            .filter(|&k| sessions[k].is_some())
+            .map(|k| [false, true].into_iter().filter(|&fog| has_probes(k, fog)).count() * PROBE_SLICES.iter().filter(|&&i| i < plan[k].out.sky.slices).count())
+            .sum();
+        let mut probed = 0;
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             let sky = &p.out.sky;
@@ -556,7 +577,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             // Fog LUT's directions at a quarter of its size each way, and
             // its texels' cost adds the quadrature's.
             for fog in [false, true] {
-                if (fog && fog_plan[k].is_empty()) || (!fog && !p.views.iter().any(Option::is_some)) {
+                if !has_probes(k, fog) {
                     continue;
                 }
                 let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
@@ -602,6 +623,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     per_slice_fixed.push((index, fixed));
                     per_slice_after.push((index, grid_quadrature + fog_quadrature));
                     per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
+                    probed += 1;
+                    tracker.lock().unwrap().planned_one("probes", start, (&sky.name, index, fog), (probed, probes));
                 }
                 for (index, view, is_fog) in to_forecast(k).filter(|v| v.2 == fog) {
                     let texels = (view.width * view.height) as f64;

@@ -109,6 +109,23 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
             BakeEvent::Forecast { from, core_seconds, samples, planning_core_seconds } => {
                 say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them)", core_seconds / 3600.0, planning_core_seconds / 3600.0));
             }
+            BakeEvent::Planning { from, sky, index, fog, done, total, elapsed_s, eta_s } => {
+                let what = format!("planning: {from} {done}/{total} ({sky}:{}{index}), ETA {}", if *fog { "fog:" } else { "" }, fmt_duration(*eta_s));
+                match style {
+                    Style::Bars => {
+                        if let Some(b) = bar.lock().unwrap().as_ref() {
+                            b.set_message(what);
+                        }
+                    }
+                    _ => {
+                        let mut last = last_line.lock().unwrap();
+                        if done == total || last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
+                            *last = Some(Instant::now());
+                            eprintln!("sky bake-luts: {what}, elapsed {}", fmt_duration(*elapsed_s));
+                        }
+                    }
+                }
+            }
             BakeEvent::Slice { .. } => {}
             BakeEvent::SkyDone { sky, slices_rendered, slices_cached, core_seconds } => {
                 say(format!(
