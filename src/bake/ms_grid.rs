@@ -216,8 +216,42 @@ impl MsGrid {
         [(at(r0, c0), (1.0 - fr) * (1.0 - fc)), (at(r0, c0 + 1), (1.0 - fr) * fc), (at(r0 + 1, c0), fr * (1.0 - fc)), (at(r0 + 1, c0 + 1), fr * fc)]
     }
 
-    /// The view of the grid's nodes for `slice`: the same sun, observer,
-    /// sampling and seed, one pixel per node.
+    /// The nodes that `slice`'s texels take (see [`RenderedNodes`]).
+    pub fn rendered_nodes(&self, slice: &View) -> RenderedNodes {
+        let sun_deg = (slice.sun_zenith_deg, slice.sun_azimuth_deg);
+        let mut taken = vec![false; self.nodes()];
+        let (w, h) = (slice.width, slice.height);
+        for i in 0..w * h {
+            if let Some(d) = slice.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h) {
+                for (k, _) in self.weights(d, sun_deg).into_iter().filter(|&(_, wk)| wk > 0.0) {
+                    taken[k] = true;
+                }
+            }
+        }
+        let mut nodes: Vec<usize> = Vec::new();
+        let mut at = vec![None; self.nodes()];
+        let direction = |k: usize| {
+            let (z, a) = self.node_deg(k, sun_deg);
+            crate::render::camera::direction_deg(z, a)
+        };
+        for k in (0..self.nodes()).filter(|&k| taken[k]) {
+            let d = direction(k);
+            // The zenith's, the nadir's and the sun's row are each one
+            // direction whatever the column: rendered once.
+            at[k] = Some(match nodes.iter().position(|&j| direction(j).distance(d) < 1e-9) {
+                Some(position) => position,
+                None => {
+                    nodes.push(k);
+                    nodes.len() - 1
+                }
+            });
+        }
+        RenderedNodes { nodes, at }
+    }
+
+    /// The view of the nodes to render for `slice` (its
+    /// [`MsGrid::rendered_nodes`]): the same sun, observer, sampling and
+    /// seed, one pixel per node.
     pub fn view(&self, slice: &View) -> View {
         self.probe_view(slice, 1)
     }
@@ -225,7 +259,8 @@ impl MsGrid {
     /// Every `stride`-th node of [`MsGrid::view`] (what a draft's
     /// forecast times); all of them with a stride of 1.
     pub fn probe_view(&self, slice: &View, stride: usize) -> View {
-        let dirs: Vec<(f64, f64)> = (0..self.nodes()).step_by(stride.max(1)).map(|k| self.node_deg(k, (slice.sun_zenith_deg, slice.sun_azimuth_deg))).collect();
+        let sun_deg = (slice.sun_zenith_deg, slice.sun_azimuth_deg);
+        let dirs: Vec<(f64, f64)> = self.rendered_nodes(slice).nodes.into_iter().step_by(stride.max(1)).map(|k| self.node_deg(k, sun_deg)).collect();
         View { width: dirs.len(), height: 1, camera: Camera::Directions(dirs), ..slice.clone() }
     }
 
@@ -247,6 +282,7 @@ impl MsGrid {
     pub fn resample(&self, nodes: &Image, scene: &Scene, slice: &View) -> Image {
         use rayon::prelude::*;
         let grid_view = self.view(slice);
+        let at = self.rendered_nodes(slice).at;
         let node_single = crate::render::single_per_pixel(scene, &grid_view);
         let multiple: Vec<[f64; 3]> = nodes.pixels.iter().zip(&node_single).map(|(p, s)| std::array::from_fn(|c| p.xyz[c] - s[c])).collect();
         let texel_single = crate::render::single_per_pixel(scene, slice);
@@ -258,6 +294,8 @@ impl MsGrid {
                 let Some(d) = d else { return PixelResult::from_xyz([0.0; 3]) };
                 let (mut xyz, mut var, mut samples) = (texel_single[i], [0.0; 3], 0.0);
                 for (k, wk) in self.weights(d, (slice.sun_zenith_deg, slice.sun_azimuth_deg)) {
+                    // (a node of weight 0 is not rendered)
+                    let Some(k) = at[k].filter(|_| wk > 0.0) else { continue };
                     let p = &nodes.pixels[k];
                     for c in 0..3 {
                         xyz[c] += wk * multiple[k][c];
@@ -270,6 +308,22 @@ impl MsGrid {
             .collect();
         Image { width: w, height: h, pixels }
     }
+}
+
+/// The nodes of a grid that a slice's texels take, each direction once:
+/// a slice renders no others. At a low sun the patch's cells that reach
+/// below the horizon are not taken (with the sun below it, none is), and
+/// the zenith's, the nadir's and the sun's rows are one direction each.
+/// Of a 16 x 13 grid's 316 nodes, a slice of 32 x 128 texels renders 238 at
+/// a sun zenith of 58.6°, 207 at 91.1° and 194 at 96.4° (tested).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderedNodes {
+    /// The nodes rendered, ascending: pixel i of [`MsGrid::view`] is node
+    /// `nodes[i]`.
+    pub nodes: Vec<usize>,
+    /// For every node of the grid, the pixel whose render it takes, or
+    /// None where no texel takes it.
+    pub at: Vec<Option<usize>>,
 }
 
 /// The angle from the sun of the sun patch's row `j`, degrees.

@@ -453,8 +453,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     let slices_total: usize = plan.iter().map(|p| p.out.slices.iter().filter(|s| s.is_some()).count() + p.views.iter().filter(|v| v.is_some()).count()).sum::<usize>() + fog_total;
     let slices_cached: usize = plan.iter().map(|p| p.out.cached).sum::<usize>() + fog_total.saturating_sub(fog_slices);
     // A slice's texels, or with a grid its nodes: what the queue renders.
-    let job_texels = |p: &Planned| p.grid.map_or(p.out.sky.width * p.out.sky.height, |g| g.nodes()) as u64;
-    let texels_to_render: u64 = plan.iter().map(|p| p.views.iter().flatten().count() as u64 * job_texels(p)).sum::<u64>() + fog_texels;
+    let job_texels = |p: &Planned| -> Vec<u64> { p.jobs.iter().map(|v| v.as_ref().map_or(0, |v| (v.width * v.height) as u64)).collect() };
+    let texels_to_render: u64 = plan.iter().map(|p| job_texels(p).iter().sum::<u64>()).sum::<u64>() + fog_texels;
     let tracker = Arc::new(Mutex::new(Tracker {
         start: Instant::now(),
         texels_total: texels_to_render,
@@ -723,7 +723,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     let atms: Vec<Atmosphere> = plan.iter().map(|p| p.atm.clone()).collect();
     drop(sessions);
     for (k, p) in plan.into_iter().enumerate() {
-        let texels_per_slice = job_texels(&p);
+        let texels_of_job = job_texels(&p);
         let Planned { mut out, views, same_as, grid, .. } = p;
         let name = out.sky.name.clone();
         for (index, s) in out.slices.iter().enumerate() {
@@ -790,7 +790,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
             let Some(first) = *first else { continue };
             let slice = out.slices[first].clone();
             let mut t = tracker.lock().unwrap();
-            t.texels_before += texels_per_slice;
+            t.texels_before += texels_of_job[index];
             t.slices_done += 1;
             if let Some(s) = &slice {
                 t.emit(cached_slice(&name, index, s));
@@ -1029,7 +1029,7 @@ mod tests {
 
     /// The DISORT Rayleigh + HG slab as a basis sky of `width` × `height`
     /// texels sampled as `sampling`, with its prepared optics.
-    fn test_sky(width: usize, height: usize, sampling: &Sampling) -> (Atmosphere, Scene, BasisSky) {
+    pub(super) fn test_sky(width: usize, height: usize, sampling: &Sampling) -> (Atmosphere, Scene, BasisSky) {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh_hg.toml");
         let atm = Atmosphere::load(&path).unwrap();
         let scene = Scene::new(&atm, &spectral_settings(sampling), &MieCache::new(None), &|| {});
@@ -1073,6 +1073,54 @@ mod tests {
         assert!(pilot_view(&View { max_rel_error: None, ..slice_view(&sky, &sampling, 0, 6371.0, 100.0, 87.5) }).is_none());
     }
 
+    /// A slice renders the nodes of its grid that its texels take, each
+    /// direction once (the zenith's, the nadir's and the sun's rows are
+    /// one each): at the talk's 32 x 128 texels fewer as the sun sets, the
+    /// sun patch's cells that reach below the horizon left out (all of
+    /// them with the sun below it); every texel's nodes among them.
+    #[test]
+    fn a_slice_renders_only_the_grid_nodes_its_texels_take() {
+        let sampling = Sampling { band_nm: 40.0, spp: 16, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
+        let (atm, _, sky) = test_sky(32, 128, &sampling);
+        let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
+        let patch = super::super::ms_grid::SUN_PATCH_ROWS * super::super::ms_grid::SUN_PATCH_COLS;
+        let mut counts = Vec::new();
+        for index in [4, 28, 45, 53, 60] {
+            let view = View { sun_azimuth_deg: 25.0, ..slice_view(&sky, &sampling, index, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg) };
+            let r = grid.rendered_nodes(&view);
+            let sun = (view.sun_zenith_deg, view.sun_azimuth_deg);
+            let direction = |k: usize| {
+                let (z, a) = grid.node_deg(k, sun);
+                crate::render::camera::direction_deg(z, a)
+            };
+            // Ascending, distinct directions, each node at its own pixel.
+            assert!(r.nodes.windows(2).all(|w| w[0] < w[1]));
+            for (i, &k) in r.nodes.iter().enumerate() {
+                assert_eq!(r.at[k], Some(i));
+                assert!(r.nodes[..i].iter().all(|&j| direction(j).distance(direction(k)) > 1e-9), "slice {index}: node {k} twice");
+            }
+            // Every texel's nodes of positive weight are rendered, and a node
+            // shares a pixel only with its own direction.
+            for i in 0..view.width * view.height {
+                let d = view.camera.direction((i % view.width) as f64 + 0.5, (i / view.width) as f64 + 0.5, view.width, view.height).unwrap();
+                for (k, w) in grid.weights(d, sun) {
+                    if w > 0.0 {
+                        let at = r.at[k].unwrap_or_else(|| panic!("slice {index}: texel {i} takes node {k}, not rendered"));
+                        assert!(direction(r.nodes[at]).distance(direction(k)) < 1e-9);
+                    }
+                }
+            }
+            let patch_rendered = r.nodes.iter().filter(|&&k| k >= grid.nodes() - patch).count();
+            eprintln!("slice {index} (sun zenith {:.1}°): {} of {} nodes, {patch_rendered} of the patch's", view.sun_zenith_deg, r.nodes.len(), grid.nodes());
+            counts.push((r.nodes.len(), patch_rendered));
+        }
+        // Fewer nodes as the sun sets (measured: 238, 236, 217, 207, 194),
+        // the patch's among them (40, 37, 23, 13, 0): none with the sun 6°
+        // below the horizon.
+        assert!(counts[0].0 < grid.nodes() - 24 && counts[0].1 > 0 && counts[4].1 == 0, "{counts:?}");
+        assert!(counts.windows(2).all(|w| w[0].0 >= w[1].0), "{counts:?}");
+    }
+
     /// A slice from its grid of multiple scattering (`ms_grid`) agrees with
     /// the slice rendered texel by texel: each texel's difference within
     /// the Sidak threshold for a family-wise false alarm of 1e-3 over every
@@ -1080,7 +1128,14 @@ mod tests {
     /// samples), its standard error the two renders' together plus an
     /// allowance of 2 % of Y for the interpolation (the worst the bench
     /// measured for a 16 x 13 grid: 1.7 %, hazed at a sun zenith of 85°); and
-    /// the mean difference over each slice within 1 %. Leaving out the single
+    /// the mean relative difference over each slice within its own
+    /// standard error times 3.48 (Sidak, 1e-3 over the two slices) plus
+    /// 0.5 %. That standard error is the grid's nodes' (the texels share
+    /// them: each node weighs in the mean by its weights over the texels)
+    /// and the whole slice's texels' together, from their own standard
+    /// errors, which at 512 samples of heavy-tailed paths run small: over
+    /// 30 seeds the grid's mean scattered by 1.9 % at slice 20 where that
+    /// estimate said at most 1.5 %, so it is taken 1.5 times. Leaving out the single
     /// scattering, or mirroring the grid the wrong way, misses by far more.
     #[test]
     fn a_slice_from_its_grid_agrees_with_the_slice_rendered_whole() {
@@ -1094,17 +1149,28 @@ mod tests {
             let nodes = render(&scene, &grid.view(&view), &cancel, &|| {}).unwrap();
             let from_grid = grid.resample(&nodes, &scene, &view);
             let whole = render(&scene, &view, &cancel, &|| {}).unwrap();
-            let (mut worst, mut mean) = (0.0f64, 0.0);
-            for (g, w) in from_grid.pixels.iter().zip(&whole.pixels) {
+            let n = whole.pixels.len() as f64;
+            let at = grid.rendered_nodes(&view).at;
+            // Each node's weight in the slice's mean relative difference.
+            let mut in_mean = vec![0.0; nodes.pixels.len()];
+            let (mut worst, mut mean, mut whole_var) = (0.0f64, 0.0, 0.0);
+            for (i, (g, w)) in from_grid.pixels.iter().zip(&whole.pixels).enumerate() {
                 let (a, b) = (g.xyz[1], w.xyz[1]);
                 let sigma = (g.xyz_stderr[1].powi(2) + w.xyz_stderr[1].powi(2) + (0.02 * b).powi(2)).sqrt();
                 worst = worst.max((a - b).abs() / sigma);
-                mean += (a - b) / b / whole.pixels.len() as f64;
+                mean += (a - b) / b / n;
+                whole_var += (a / b * w.xyz_stderr[1] / b / n).powi(2);
                 assert!(g.samples > 0 && g.samples <= 512, "{}", g.samples);
+                let d = view.camera.direction((i % view.width) as f64 + 0.5, (i / view.width) as f64 + 0.5, view.width, view.height).unwrap();
+                for (k, wk) in grid.weights(d, (view.sun_zenith_deg, view.sun_azimuth_deg)).into_iter().filter(|&(_, wk)| wk > 0.0) {
+                    in_mean[at[k].unwrap()] += wk / b / n;
+                }
             }
-            eprintln!("slice {index}: worst z {worst:.2}, mean relative difference {:.3} %", 100.0 * mean);
+            let grid_var: f64 = in_mean.iter().zip(&nodes.pixels).map(|(c, p)| (c * p.xyz_stderr[1]).powi(2)).sum();
+            let se = 1.5 * (grid_var + whole_var).sqrt();
+            eprintln!("slice {index}: worst z {worst:.2}, mean relative difference {:.3} % (standard error {:.3} %)", 100.0 * mean, 100.0 * se);
             assert!(worst < z_crit, "slice {index}: a texel {worst:.2} standard errors off");
-            assert!(mean.abs() < 0.01, "slice {index}: mean relative difference {mean}");
+            assert!(mean.abs() < 3.48 * se + 0.005, "slice {index}: mean relative difference {mean}, standard error {se}");
         }
     }
 
