@@ -523,8 +523,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 // job, the first-collision guide, single scattering) and a
                 // part per sample: the pilot and a one-sample render of the
                 // same view tell them apart. Rendered here in one piece, as
-                // the probes below are ([`timed_here`]; a grid's pilot, 316
-                // nodes of 32 samples, is of the size of a farm task's
+                // the probes below are ([`timed_here`]; a grid's pilot, up to
+                // 316 nodes of 32 samples, is of the size of a farm task's
                 // preparation); its pixels are the very ones the farm would
                 // return.
                 let (image, pilot_core_s) = timed_here(&session.scene, &pilot, &cancel)?;
