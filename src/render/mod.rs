@@ -635,30 +635,40 @@ pub enum RenderError {
 /// Renders every pixel on the current rayon pool. `on_pixel` is called after
 /// each pixel (for progress); `cancel` stops the render.
 pub fn render(scene: &Scene, s: &View, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<Image, RenderError> {
+    render_timed(scene, s, cancel, on_pixel).map(|(image, _)| image)
+}
+
+/// [`render`], with the seconds each pixel took on its thread (what a
+/// bake's forecast weighs each texel's samples by); 0 for every pixel of a
+/// view of several parts (a strip), which renders by columns.
+pub fn render_timed(scene: &Scene, s: &View, cancel: &AtomicBool, on_pixel: &(dyn Fn() + Sync)) -> Result<(Image, Vec<f64>), RenderError> {
     use rayon::prelude::*;
+    let n = s.width * s.height;
     if s.parts().len() > 1 {
         let columns = render_columns(scene, s, 0, s.width, cancel, on_pixel).ok_or(RenderError::Cancelled)?;
         let pixels = (0..s.height).flat_map(|y| columns.iter().map(move |c| c[y].clone())).collect();
-        return Ok(Image { width: s.width, height: s.height, pixels });
+        return Ok((Image { width: s.width, height: s.height, pixels }, vec![0.0; n]));
     }
-    let n = s.width * s.height;
     let tracers = PixelTracers::new(scene, s);
-    let pixels: Vec<Option<PixelResult>> = (0..n)
+    let pixels: Vec<Option<(PixelResult, f64)>> = (0..n)
         .into_par_iter()
         .map(|i| {
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
+            let start = std::time::Instant::now();
             let r = render_pixel_with(&tracers, scene, s, i, cancel);
+            let seconds = start.elapsed().as_secs_f64();
             if cancel.load(Ordering::Relaxed) {
                 return None;
             }
             on_pixel();
-            Some(r)
+            Some((r, seconds))
         })
         .collect();
     if cancel.load(Ordering::Relaxed) || pixels.iter().any(|p| p.is_none()) {
         return Err(RenderError::Cancelled);
     }
-    Ok(Image { width: s.width, height: s.height, pixels: pixels.into_iter().map(Option::unwrap).collect() })
+    let (pixels, seconds) = pixels.into_iter().map(Option::unwrap).unzip();
+    Ok((Image { width: s.width, height: s.height, pixels }, seconds))
 }
