@@ -268,10 +268,12 @@ impl MsGrid {
     /// (the texels' and the nodes'), on this process's threads: what a
     /// slice from a grid costs besides its nodes.
     pub fn time_quadrature(&self, scene: &Scene, slice: &View) -> f64 {
-        let start = std::time::Instant::now();
-        std::hint::black_box(crate::render::single_per_pixel(scene, slice));
-        std::hint::black_box(crate::render::single_per_pixel(scene, &self.view(slice)));
-        start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64
+        time_single(scene, slice) + self.time_nodes_quadrature(scene, slice)
+    }
+
+    /// Core-seconds of the nodes' part of [`MsGrid::time_quadrature`].
+    pub fn time_nodes_quadrature(&self, scene: &Scene, slice: &View) -> f64 {
+        time_single(scene, &self.view(slice))
     }
 
     /// The slice of `slice` (a LUT view) from its grid's render (`nodes`,
@@ -282,6 +284,7 @@ impl MsGrid {
     pub fn resample(&self, nodes: &Image, scene: &Scene, slice: &View) -> Image {
         use rayon::prelude::*;
         let grid_view = self.view(slice);
+        assert_eq!(nodes.pixels.len(), grid_view.width, "a render of this slice's nodes");
         let at = self.rendered_nodes(slice).at;
         let node_single = crate::render::single_per_pixel(scene, &grid_view);
         let multiple: Vec<[f64; 3]> = nodes.pixels.iter().zip(&node_single).map(|(p, s)| std::array::from_fn(|c| p.xyz[c] - s[c])).collect();
@@ -292,10 +295,18 @@ impl MsGrid {
             .map(|i| {
                 let d = slice.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h);
                 let Some(d) = d else { return PixelResult::from_xyz([0.0; 3]) };
-                let (mut xyz, mut var, mut samples) = (texel_single[i], [0.0; 3], 0.0);
+                // The weights by rendered pixel: nodes of one direction
+                // share one pixel's noise (a node of weight 0 is not rendered).
+                let mut by_pixel: Vec<(usize, f64)> = Vec::with_capacity(8);
                 for (k, wk) in self.weights(d, (slice.sun_zenith_deg, slice.sun_azimuth_deg)) {
-                    // (a node of weight 0 is not rendered)
-                    let Some(k) = at[k].filter(|_| wk > 0.0) else { continue };
+                    let Some(at) = at[k].filter(|_| wk > 0.0) else { continue };
+                    match by_pixel.iter_mut().find(|(j, _)| *j == at) {
+                        Some((_, w)) => *w += wk,
+                        None => by_pixel.push((at, wk)),
+                    }
+                }
+                let (mut xyz, mut var, mut samples) = (texel_single[i], [0.0; 3], 0.0);
+                for (k, wk) in by_pixel {
                     let p = &nodes.pixels[k];
                     for c in 0..3 {
                         xyz[c] += wk * multiple[k][c];
@@ -310,9 +321,17 @@ impl MsGrid {
     }
 }
 
+/// Core-seconds of single scattering by quadrature at every pixel of
+/// `view`, on this process's threads.
+pub fn time_single(scene: &Scene, view: &View) -> f64 {
+    let start = std::time::Instant::now();
+    std::hint::black_box(crate::render::single_per_pixel(scene, view));
+    start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64
+}
+
 /// The nodes of a grid that a slice's texels take, each direction once:
 /// a slice renders no others. At a low sun the patch's cells that reach
-/// below the horizon are not taken (with the sun below it, none is), and
+/// below the horizon are not taken (none with the sun 6° below it), and
 /// the zenith's, the nadir's and the sun's rows are one direction each.
 /// Of a 16 x 13 grid's 316 nodes, a slice of 32 x 128 texels renders 238 at
 /// a sun zenith of 58.6°, 207 at 91.1° and 194 at 96.4° (tested).

@@ -608,7 +608,10 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                         let smaller = View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full.clone() };
                         match p.grid {
                             Some(g) => {
-                                grid_quadrature = g.time_quadrature(&session.scene, &smaller) * (full.width * full.height) as f64 / (smaller.width * smaller.height) as f64;
+                                // (the texels' quadrature timed on the probe's
+                                // texels, the nodes' on the slice's own)
+                                let texels_quadrature = super::ms_grid::time_single(&session.scene, &smaller) * (full.width * full.height) as f64 / (smaller.width * smaller.height) as f64;
+                                grid_quadrature = texels_quadrature + g.time_nodes_quadrature(&session.scene, &full);
                                 g.probe_view(&full, PROBE_STRIDE * PROBE_STRIDE)
                             }
                             None => smaller,
@@ -1050,7 +1053,7 @@ fn slice_of_strip(image: &Image, x0: usize, view: &View, sky: &str, index: usize
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::{render, Scene};
+    use crate::render::{render, PixelResult, Scene};
 
     /// The DISORT Rayleigh + HG slab as a basis sky of `width` × `height`
     /// texels sampled as `sampling`, with its prepared optics.
@@ -1117,7 +1120,7 @@ mod tests {
     /// direction once (the zenith's, the nadir's and the sun's rows are
     /// one each): at the talk's 32 x 128 texels fewer as the sun sets, the
     /// sun patch's cells that reach below the horizon left out (all of
-    /// them with the sun below it); every texel's nodes among them.
+    /// them with the sun 6° below it); every texel's nodes among them.
     #[test]
     fn a_slice_renders_only_the_grid_nodes_its_texels_take() {
         let sampling = Sampling { band_nm: 40.0, spp: 16, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
@@ -1155,10 +1158,43 @@ mod tests {
             counts.push((r.nodes.len(), patch_rendered));
         }
         // Fewer nodes as the sun sets (measured: 238, 236, 217, 207, 194),
-        // the patch's among them (40, 37, 23, 13, 0): none with the sun 6°
-        // below the horizon.
-        assert!(counts[0].0 < grid.nodes() - 24 && counts[0].1 > 0 && counts[4].1 == 0, "{counts:?}");
+        // the patch's among them (40, 37, 23, 13, 0): by day fewer than the
+        // 30 copies of the zenith's, nadir's and sun's rows alone leave out,
+        // none of the patch with the sun 6° below the horizon.
+        assert!(counts[0].0 < grid.nodes() - 30 && counts[0].1 > 0 && counts[4].1 == 0, "{counts:?}");
         assert!(counts.windows(2).all(|w| w[0].0 >= w[1].0), "{counts:?}");
+    }
+
+    /// Nodes of one direction share one noise in a texel's standard error:
+    /// with every rendered node's standard error 1, a texel's is the root of
+    /// the sum over rendered pixels of its weights on each, squared, which
+    /// for a texel by the zenith (its cell's two upper nodes one pixel) is
+    /// more than the sum of the squared weights node by node.
+    #[test]
+    fn nodes_of_one_direction_share_their_noise() {
+        let sampling = Sampling { band_nm: 40.0, spp: 16, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
+        let (atm, scene, sky) = test_sky(8, 32, &sampling);
+        let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
+        let view = slice_view(&sky, &sampling, 4, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg);
+        let nodes_view = grid.view(&view);
+        let single = crate::render::single_per_pixel(&scene, &nodes_view);
+        let pixels = single.iter().map(|&xyz| PixelResult { xyz_stderr: [1.0; 3], samples: 1, ..PixelResult::from_xyz(xyz) }).collect();
+        let resampled = grid.resample(&Image { width: nodes_view.width, height: 1, pixels }, &scene, &view);
+        let at = grid.rendered_nodes(&view).at;
+        let mut merged_somewhere = false;
+        for (i, texel) in resampled.pixels.iter().enumerate() {
+            let d = view.camera.direction((i % view.width) as f64 + 0.5, (i / view.width) as f64 + 0.5, view.width, view.height).unwrap();
+            let weights: Vec<(usize, f64)> = grid.weights(d, (view.sun_zenith_deg, view.sun_azimuth_deg)).into_iter().filter(|w| w.1 > 0.0).collect();
+            let mut by_pixel = std::collections::BTreeMap::new();
+            for &(k, w) in &weights {
+                *by_pixel.entry(at[k].unwrap()).or_insert(0.0) += w;
+            }
+            let shared: f64 = by_pixel.values().map(|w| w * w).sum();
+            let apart: f64 = weights.iter().map(|(_, w)| w * w).sum();
+            merged_somewhere |= shared > apart + 1e-9;
+            assert!((texel.xyz_stderr[1] - shared.sqrt()).abs() < 1e-12, "texel {i}: {} against {}", texel.xyz_stderr[1], shared.sqrt());
+        }
+        assert!(merged_somewhere, "no texel took two nodes of one direction");
     }
 
     /// A slice from its grid of multiple scattering (`ms_grid`) agrees with
