@@ -779,19 +779,33 @@ fn a_task_without_optics_waits_for_optics_still_unpacking() {
 /// `sky bake-luts` over two `sky worker` daemons: each basis sky's slices
 /// go to the farm as one job (a strip of slices), the skies' strips in one
 /// queue, the fog slices a job each, and the baked files are byte-identical
-/// to those of the embedded worker.
+/// to those of the embedded worker. Its ETA is shared among the farm's
+/// threads from the first: none until a worker said its threads.
 #[test]
 fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
     let mut farm = Farm::new();
     let a = farm.start("a", &[]);
     let b = farm.start("b", &[]);
     let bake = root().join("tests/bakes/tiny.toml");
+    // The bake's JSON lines: its progress events, then its summary.
     let bake_to = |out: &str, farm_args: &[String]| {
-        let o = Command::new(SKY).args(["bake-luts", bake.to_str().unwrap(), "--out", farm.path(out).to_str().unwrap(), "--json"]).args(farm_args).env("SKY_CACHE_DIR", "off").output().unwrap();
+        let o = Command::new(SKY)
+            .args(["bake-luts", bake.to_str().unwrap(), "--out", farm.path(out).to_str().unwrap(), "--json", "--json-progress"])
+            .args(farm_args)
+            .env("SKY_CACHE_DIR", "off")
+            .output()
+            .unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
-        serde_json::from_slice::<serde_json::Value>(&o.stdout).unwrap()
+        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()).collect::<Vec<_>>()
     };
-    let on_farm = bake_to("farm", &["--workers".to_string(), farm.list(&[a, b]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    let events = bake_to("farm", &["--workers".to_string(), farm.list(&[a, b]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    let on_farm = events.last().unwrap().clone();
+    // Two workers of one thread: the first ETA is about the forecast over
+    // two (over one, as it was before the workers' threads were waited
+    // for, it would be about the whole forecast).
+    let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap()["core_seconds"].as_f64().unwrap();
+    let first_eta = events.iter().filter(|e| e["event"] == "progress").find_map(|e| e["eta_s"].as_f64()).unwrap();
+    assert!(first_eta < 0.75 * forecast, "first ETA {first_eta} s against a forecast of {forecast} core-seconds on two threads");
     bake_to("local", &[]);
     for k in on_farm["skies"].as_array().unwrap() {
         assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(63), Some(1)), "{on_farm}");

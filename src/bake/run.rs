@@ -196,6 +196,9 @@ struct Tracker {
     forecast_total: Option<f64>,
     forecast_done: f64,
     cores: usize,
+    /// Whether `cores` is known: from the start with the embedded worker
+    /// alone, else once a farm worker said its threads in its Hello.
+    cores_known: bool,
     /// Rendering pilots: the farm's progress is not the bake's.
     planning: bool,
     sink: Option<BakeSink>,
@@ -250,6 +253,10 @@ impl Tracker {
             // trusted in proportion to the share done (the pilots time each
             // slice on these very workers; the measured pace takes over what
             // they got wrong).
+            // (none before the farm's threads are known: the forecast over
+            // the one core assumed until then was twice the ETA of a
+            // two-worker farm)
+            Some(_) if !self.cores_known => None,
             Some(total) if total > 0.0 => {
                 let done = (self.forecast_done + in_forecast).min(total);
                 let left = total - done;
@@ -467,6 +474,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         forecast_total: None,
         forecast_done: 0.0,
         cores: opts.cores,
+        cores_known: opts.workers.iter().all(|w| matches!(w, WorkerSpec::Local { .. })),
         planning: false,
         sink: opts.events.clone(),
     }));
@@ -926,11 +934,15 @@ fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
         match e {
             FarmEvent::Progress(_) if t.planning => {}
             FarmEvent::Progress(p) => {
-                // The farm's threads, once its workers said them: what the
-                // forecast's core-seconds are shared among.
-                let threads: usize = p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).sum();
-                if threads > 0 {
-                    t.cores = threads;
+                // The farm's threads, once a worker said its own: what the
+                // forecast's core-seconds are shared among, a worker yet to
+                // say counted at the others' mean.
+                let serving: Vec<usize> = p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).collect();
+                let known: Vec<usize> = serving.iter().copied().filter(|&n| n > 0).collect();
+                if !known.is_empty() {
+                    let sum: usize = known.iter().sum();
+                    t.cores = sum + ((serving.len() - known.len()) * sum).div_ceil(known.len());
+                    t.cores_known = true;
                 }
                 let p = t.progress(p.pixels_done, p.stalled.clone());
                 t.emit(BakeEvent::Progress(p));

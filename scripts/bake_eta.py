@@ -1,0 +1,74 @@
+#!/usr/bin/env python3
+"""How right a bake's ETA was: reads the JSON lines of `sky bake-luts ...
+--json-progress` (a file, or - for standard input) and prints the forecast
+against the cost rendered, each slice's forecast against its cost, and the
+predicted end (elapsed + ETA) against the real end at fractions of the
+bake's wall time, with the worst error before a tenth of it (issue 12: "an
+ETA that is right to 10 % before the bake is a tenth done").
+
+    scripts/bake_eta.py progress.jsonl
+
+The real end is the last progress event's elapsed time, so run it on a
+bake that finished; on one still running it says so and reports the
+predicted end's drift instead. Standard library only.
+"""
+import json
+import sys
+
+
+def main():
+    if len(sys.argv) != 2:
+        print(__doc__.strip(), file=sys.stderr)
+        return 2
+    src = sys.stdin if sys.argv[1] == "-" else open(sys.argv[1], encoding="utf-8")
+    events = []
+    for number, line in enumerate(src, 1):
+        if line.startswith("{"):
+            try:
+                events.append(json.loads(line))
+            except json.JSONDecodeError as e:
+                print(f"{sys.argv[1]}:{number}: not JSON: {e}", file=sys.stderr)
+                return 1
+    forecast = next((e for e in events if e["event"] == "forecast"), None)
+    progress = [e for e in events if e["event"] == "progress" and e.get("eta_s") is not None]
+    slices = [e for e in events if e["event"] == "slice" and not e.get("cached")]
+    finished = any(e["event"] in ("sky_done", "fog_done") for e in events) and progress and progress[-1]["texels_done"] >= progress[-1]["texels_total"]
+    if forecast:
+        print(f"forecast ({forecast['from']}): {forecast['core_seconds']:.0f} core-seconds, planning {forecast['planning_core_seconds']:.0f}")
+    if slices:
+        cost = sum(e["core_seconds"] for e in slices)
+        planned = sum(e["forecast_core_seconds"] or 0.0 for e in slices)
+        print(f"{len(slices)} slices rendered: {cost:.0f} core-seconds against {planned:.0f} forecast ({100 * (cost / planned - 1) if planned else 0:+.1f} %)")
+        for e in slices:
+            f = e["forecast_core_seconds"]
+            if f:
+                print(f"  {e['sky']}:{e['index']} (sun zenith {e['sun_zenith_deg']:.1f}°): {e['core_seconds']:.1f} against {f:.1f} ({100 * (e['core_seconds'] / f - 1):+.1f} %)")
+    if not progress:
+        print("no progress event with an ETA")
+        return 0
+    start = progress[0]["elapsed_s"] - 0.0
+    last = progress[-1]["elapsed_s"]
+    ends = [(p["elapsed_s"], p["elapsed_s"] + p["eta_s"]) for p in progress]
+    if finished:
+        print(f"real end {last:.0f} s; predicted end against it, at a share of the wall time:")
+        for q in (0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 0.9):
+            at = [(t, end) for t, end in ends if t >= q * last]
+            if at:
+                t, end = at[0]
+                print(f"  {100 * q:4.0f} % (t = {t:.0f} s): {end:.0f} s ({100 * (end / last - 1):+.1f} %)")
+        early = [abs(end / last - 1) for t, end in ends if t <= 0.1 * last]
+        if early:
+            print(f"worst before a tenth of the wall time: {100 * max(early):.1f} %")
+    else:
+        print(f"not finished (last progress at {last:.0f} s, {progress[-1]['texels_done']}/{progress[-1]['texels_total']} texels); the predicted end over time:")
+        step = max(1, len(ends) // 10)
+        for t, end in ends[::step] + [ends[-1]]:
+            print(f"  t = {t:.0f} s: {end:.0f} s ({100 * (end / ends[0][1] - 1):+.1f} % against the first, at {start:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    try:
+        sys.exit(main())
+    except BrokenPipeError:
+        sys.exit(0)
