@@ -544,7 +544,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 // texel whose paths are long (toward the horizon at
                 // twilight) costs more a sample, and it is the noisy one
                 // that takes many. One mean cost a sample, as before,
-                // forecast twilight grid slices 20 to 27 % low.
+                // forecast twilight grid slices 18 to 27 % low (README).
                 let sampling_core_s = (pilot_core_s - one_core_s).max(0.0);
                 let planned_cost = sample_weighted(&planned, &pilot_pixel_s, &one_pixel_s) * sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64;
                 // A fog slice's Fog is its render plus single scattering by

@@ -80,6 +80,16 @@ const LINE_PERIOD: Duration = Duration::from_secs(5);
 fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
     let last_line: Mutex<Option<Instant>> = Mutex::new(None);
     BakeSink::new(move |e| {
+        // Whether a plain line is due (LINE_PERIOD since the last, or
+        // `now`), counting it as printed if so.
+        let line_due = |now: bool| {
+            let mut last = last_line.lock().unwrap();
+            let due = now || last.is_none_or(|t| t.elapsed() >= LINE_PERIOD);
+            if due {
+                *last = Some(Instant::now());
+            }
+            due
+        };
         if style == Style::Json {
             if let Ok(s) = serde_json::to_string(e) {
                 outln!("{s}");
@@ -118,9 +128,7 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                         }
                     }
                     _ => {
-                        let mut last = last_line.lock().unwrap();
-                        if done == total || last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
-                            *last = Some(Instant::now());
+                        if line_due(done == total) {
                             eprintln!("sky bake-luts: {what}, elapsed {}", fmt_duration(*elapsed_s));
                         }
                     }
@@ -148,9 +156,7 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                         }
                     }
                     _ => {
-                        let mut last = last_line.lock().unwrap();
-                        if last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
-                            *last = Some(Instant::now());
+                        if line_due(false) {
                             let pct = 100.0 * p.texels_done as f64 / p.texels_total.max(1) as f64;
                             eprintln!(
                                 "sky bake-luts: {pct:.0} % ({}/{} texels, {}/{} slices), elapsed {}, {msg}",
@@ -166,9 +172,7 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
             }
             BakeEvent::FogSlice { sky, done, total } => {
                 if style == Style::Lines {
-                    let mut last = last_line.lock().unwrap();
-                    if last.is_none_or(|t| t.elapsed() >= LINE_PERIOD) {
-                        *last = Some(Instant::now());
+                    if line_due(false) {
                         eprintln!("sky bake-luts: {sky}: fog slice {done}/{total}");
                     }
                 } else if let Some(b) = bar.lock().unwrap().as_ref() {
