@@ -10,7 +10,9 @@
 //! (`src/bake/ms_grid.rs`), which a slice from a grid depends on too (and a
 //! farm worker does not run), and `SKY_FOG_RESAMPLE_SOURCE` the resampling
 //! of a Shadowed Fog rendered at a size of its own (`src/bake/fog_resample.rs`
-//! and the Fog LUT's mapping, `src/lut/fog.rs`).
+//! and the Fog LUT's mapping, `src/lut/fog.rs`). `SKY_FORECAST_SOURCE`
+//! names the code of a bake's forecast from pilots and the quadratures it
+//! times, so that a pilot's saved forecast is planned again when it changes.
 
 use std::path::{Path, PathBuf};
 
@@ -65,6 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
     println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
     println!("cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}", source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"]));
+    println!("cargo:rustc-env=SKY_FORECAST_SOURCE={}", source_hash(&["src/bake/run.rs", "src/bake/fog.rs", "src/bake/ms_grid.rs"]));
     let fds = protox::compile([proto], ["proto"])?;
     tonic_prost_build::configure().build_client(true).build_server(true).compile_fds(fds)?;
     Ok(())

@@ -6,7 +6,14 @@ predicted end (elapsed + ETA) against the real end at fractions of the
 bake's wall time, with the worst error before a tenth of it (issue 12: "an
 ETA that is right to 10 % before the bake is a tenth done").
 
-    scripts/bake_eta.py progress.jsonl
+    scripts/bake_eta.py progress.jsonl [--threads N]
+
+With the farm's threads (`--threads`), and pilots that carried their
+slice's forecast (`planning` events), it also prints the queue's pace
+group by group of slices while it renders: the wall time between the
+progress reaching a slice and the slice eight further on, times the
+threads, against the forecast of those slices (the queue's slices are
+cached only at its end, so their `slice` events come late).
 
 The real end is the last progress event's elapsed time, so run it on a
 bake that finished; on one still running it says so and reports the
@@ -17,17 +24,27 @@ import sys
 
 
 def main():
-    if len(sys.argv) != 2:
+    args = sys.argv[1:]
+    threads = None
+    if "--threads" in args:
+        i = args.index("--threads")
+        try:
+            threads = int(args[i + 1])
+        except (IndexError, ValueError):
+            print("--threads needs a whole number", file=sys.stderr)
+            return 2
+        del args[i : i + 2]
+    if len(args) != 1:
         print(__doc__.strip(), file=sys.stderr)
         return 2
-    src = sys.stdin if sys.argv[1] == "-" else open(sys.argv[1], encoding="utf-8")
+    src = sys.stdin if args[0] == "-" else open(args[0], encoding="utf-8")
     events = []
     for number, line in enumerate(src, 1):
         if line.startswith("{"):
             try:
                 events.append(json.loads(line))
             except json.JSONDecodeError as e:
-                print(f"{sys.argv[1]}:{number}: not JSON: {e}", file=sys.stderr)
+                print(f"{args[0]}:{number}: not JSON: {e}", file=sys.stderr)
                 return 1
     forecast = next((e for e in events if e["event"] == "forecast"), None)
     progress = [e for e in events if e["event"] == "progress" and e.get("eta_s") is not None]
@@ -43,6 +60,8 @@ def main():
             f = e["forecast_core_seconds"]
             if f:
                 print(f"  {e['sky']}:{e['index']} (sun zenith {e['sun_zenith_deg']:.1f}°): {e['core_seconds']:.1f} against {f:.1f} ({100 * (e['core_seconds'] / f - 1):+.1f} %)")
+    if threads:
+        queue_pace(events, threads)
     if not progress:
         print("no progress event with an ETA")
         return 0
@@ -65,6 +84,33 @@ def main():
         for t, end in ends[::step] + [ends[-1]]:
             print(f"  t = {t:.0f} s: {end:.0f} s ({100 * (end / ends[0][1] - 1):+.1f} % against the first, at {start:.0f} s)")
     return 0
+
+
+def queue_pace(events, threads, group=8):
+    """The queue's cost against its forecast, `group` slices at a time."""
+    forecast = {}
+    for e in events:
+        if e["event"] == "planning" and e.get("forecast_core_seconds") is not None:
+            forecast[(e["sky"] + (" (fog)" if e["fog"] else ""), e["index"])] = e["forecast_core_seconds"]
+    first_seen, order = {}, []
+    for e in events:
+        if e["event"] == "progress" and e.get("sky"):
+            key = (e["sky"], e["index"])
+            if key not in first_seen:
+                first_seen[key] = e["elapsed_s"]
+                order.append(key)
+    if not forecast or len(order) < 2:
+        print("no per-slice forecast (planning events of pilots) or too little progress for the queue's pace")
+        return
+    print(f"the queue's pace on {threads} threads, {group} slices at a time (cost = wall time between reaching the first and the next group, times the threads):")
+    for i in range(0, len(order) - 1, group):
+        j = min(i + group, len(order) - 1)
+        keys = order[i:j]
+        wall = first_seen[order[j]] - first_seen[order[i]]
+        planned = sum(forecast.get(k, 0.0) for k in keys)
+        if planned > 0:
+            name = f"{keys[0][0]}:{keys[0][1]}..{keys[-1][1]}"
+            print(f"  {name}: {wall * threads:.0f} core-seconds against {planned:.0f} forecast ({100 * (wall * threads / planned - 1):+.0f} %)")
 
 
 if __name__ == "__main__":

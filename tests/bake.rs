@@ -255,6 +255,28 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
     // A pilot for every distinct slice, sky and fog (63 of each: two
     // slices share a sun), each reported.
     assert_planning_counts(&events, "pilots", 63 + 63);
+    assert_eq!(forecast["saved"], 0, "{forecast}");
+    // Run again with its slices gone from the cache (as a bake stopped in
+    // its queue, after planning): it plans from the pilots' forecasts saved
+    // in the cache folder, to the same forecast; on other threads (the
+    // times are another machine's) it renders its pilots again.
+    let again = |threads: &str| {
+        for f in std::fs::read_dir(out.join("cache")).unwrap().flatten() {
+            if f.path().extension().is_some_and(|e| e == "slice") {
+                std::fs::remove_file(f.path()).unwrap();
+            }
+        }
+        let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress", "--threads", threads], tmp.path());
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+        assert_planning_counts(&events, "pilots", 63 + 63);
+        events.into_iter().find(|e| e["event"] == "forecast").unwrap()
+    };
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let same = again(&threads.to_string());
+    assert_eq!((&same["saved"], &same["core_seconds"], &same["samples"]), (&serde_json::json!(126), &forecast["core_seconds"], &forecast["samples"]), "{same}");
+    let other = again(&(threads + 1).to_string());
+    assert_eq!(other["saved"], 0, "{other}");
 }
 
 /// A preset with `ms_grid` renders each slice as its grid's nodes (a job

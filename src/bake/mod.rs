@@ -17,6 +17,7 @@ pub mod pack;
 pub mod pack_ambient;
 pub mod pack_fog;
 pub mod run;
+mod tracker;
 pub mod verify;
 pub mod verify_fog;
 
@@ -43,12 +44,15 @@ pub enum BakeEvent {
     /// texel: every texel's sample count exactly, and core-seconds at the
     /// pilots' pace); with a fixed sample count from probes (a few slices
     /// at a sixteenth of their texels, timed). `from`: "pilots" or "probes".
-    Forecast { from: &'static str, core_seconds: f64, samples: u64, planning_core_seconds: f64 },
+    /// `saved`: pilots whose forecast was in the cache folder, saved by a
+    /// run of the same bake on this machine that was stopped.
+    Forecast { from: &'static str, core_seconds: f64, samples: u64, planning_core_seconds: f64, saved: usize },
     /// Planning's progress: one more pilot (or probe) of the forecast is
     /// rendered, `done` of `total`, the last of slice `index` of `sky` (a
     /// fog slice's if `fog`); `eta_s` for the rest of planning at its pace
-    /// so far.
-    Planning { from: &'static str, sky: String, index: usize, fog: bool, done: usize, total: usize, elapsed_s: f64, eta_s: f64 },
+    /// so far; a pilot's `forecast_core_seconds` of its slice (its
+    /// render in the queue and the quadrature after it).
+    Planning { from: &'static str, sky: String, index: usize, fog: bool, done: usize, total: usize, elapsed_s: f64, eta_s: f64, forecast_core_seconds: Option<f64> },
     /// One slice is done (rendered now, or found in the cache), with what
     /// it cost and, rendered now after a forecast, what was forecast.
     Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, forecast_core_seconds: Option<f64>, mean_samples: f64 },

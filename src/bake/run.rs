@@ -20,10 +20,10 @@ use super::file::{BakeFile, BasisSky, Quality, Sampling};
 use super::fog::FogTodo;
 use super::lighting::{lighting_key, SkyLighting};
 use super::ms_grid::MsGrid;
-use super::{BakeError, BakeEvent, BakeProgress, BakeSink};
+use super::tracker::{farm_options, QueueJob, Tracker};
+use super::{BakeError, BakeEvent, BakeSink};
 use crate::atmosphere::Atmosphere;
 use crate::farm::coordinator::{FarmError, FarmPart, Options, WorkerSpec};
-use crate::farm::events::{EventSink, FarmEvent};
 use crate::farm::journal::{Header, Journal};
 use crate::lut::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
@@ -177,145 +177,6 @@ pub fn planned_samples(view: &View, pilot: &Image) -> Vec<u32> {
     pilot.pixels.iter().map(|p| if p.samples == 0 { 0 } else { ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left) }).collect()
 }
 
-/// Bake-wide progress, updated from the farm's progress of each slice.
-struct Tracker {
-    start: Instant,
-    texels_total: u64,
-    texels_before: u64,
-    slices_total: usize,
-    slices_done: usize,
-    /// The slice being rendered (or planned).
-    current: (String, usize),
-    /// The slices being rendered in one queue (one farm render).
-    job: Option<QueueJob>,
-    /// Seconds spent preparing optics and rendering pilots (not the
-    /// slices), left out of the rate.
-    prep_s: f64,
-    /// With adaptive sampling, the pilots' forecast: core-seconds of every
-    /// slice to render, of those done, and of the current slice.
-    forecast_total: Option<f64>,
-    forecast_done: f64,
-    cores: usize,
-    /// Whether `cores` is known: from the start with the embedded worker
-    /// alone, else once a farm worker said its threads in its Hello.
-    cores_known: bool,
-    /// Rendering pilots: the farm's progress is not the bake's.
-    planning: bool,
-    sink: Option<BakeSink>,
-}
-
-impl Tracker {
-    fn emit(&self, e: BakeEvent) {
-        if let Some(s) = &self.sink {
-            s.emit(&e);
-        }
-    }
-
-    /// Planning is over (it began at `start`): the forecast of `total`
-    /// core-seconds and `samples`, from "pilots" or "probes", is the ETA's.
-    fn forecast(&mut self, from: &'static str, start: Instant, total: f64, samples: u64) {
-        let planning_s = start.elapsed().as_secs_f64();
-        self.prep_s += planning_s;
-        self.planning = false;
-        self.forecast_total = Some(total);
-        // Pilots and probes render on this process's threads.
-        self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * rayon::current_num_threads() as f64 });
-    }
-
-    /// One more pilot or probe (`from`) rendered, of slice `index` of
-    /// `sky` (a fog slice's if `fog`): `done` of `total`, planning having
-    /// begun at `start`.
-    fn planned_one(&self, from: &'static str, start: Instant, (sky, index, fog): (&str, usize, bool), (done, total): (usize, usize)) {
-        let elapsed_s = start.elapsed().as_secs_f64();
-        let eta_s = elapsed_s * total.saturating_sub(done) as f64 / done.max(1) as f64;
-        self.emit(BakeEvent::Planning { from, sky: sky.to_string(), index, fog, done, total, elapsed_s, eta_s });
-    }
-
-    /// Progress with `in_job` texels of the current queue done; the slice
-    /// they reach becomes the current one.
-    fn progress(&mut self, in_job: u64, stalled: Option<String>) -> BakeProgress {
-        let elapsed_s = self.start.elapsed().as_secs_f64();
-        let texels_done = (self.texels_before + in_job).min(self.texels_total);
-        let in_forecast = match &self.job {
-            Some(j) => {
-                self.current = j.slice_at(in_job);
-                j.forecast_at(in_job)
-            }
-            None => 0.0,
-        };
-        let (sky, index) = self.current.clone();
-        // The rate of rendering so far (optics preparation left out), once
-        // a hundredth of the work gives it meaning.
-        let render_s = (elapsed_s - self.prep_s).max(1e-3);
-        let eta_s = match self.forecast_total {
-            // The forecast's core-seconds still to go, over the cores, and
-            // at the pace measured against the forecast so far, the latter
-            // trusted in proportion to the share done (the pilots time each
-            // slice on these very workers; the measured pace takes over what
-            // they got wrong).
-            // (none before the farm's threads are known: the forecast over
-            // the one core assumed until then was twice the ETA of a
-            // two-worker farm)
-            Some(_) if !self.cores_known => None,
-            Some(total) if total > 0.0 => {
-                let done = (self.forecast_done + in_forecast).min(total);
-                let left = total - done;
-                let share = done / total;
-                let measured = if done > 0.0 { render_s / done } else { 0.0 };
-                Some(left * ((1.0 - share) / self.cores.max(1) as f64 + share * measured))
-            }
-            _ => (texels_done * 100 >= self.texels_total && texels_done > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / texels_done as f64),
-        };
-        BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky, index, stalled }
-    }
-}
-
-/// Slices rendered in one queue, in its order: the strips of several basis
-/// skies (each strip one farm job), or one fog slice.
-struct QueueJob {
-    /// Each slice's basis sky, index and texels.
-    slices: Vec<(String, usize, u64)>,
-    /// Texels of the slices before each one, `slices.len() + 1` values.
-    cumulative_texels: Vec<u64>,
-    /// The forecast of the slices before each one (core-seconds), `slices.len() + 1` values.
-    cumulative_forecast: Vec<f64>,
-}
-
-impl QueueJob {
-    /// The queue of `slices` with their forecast core-seconds.
-    fn new(slices: Vec<(String, usize, u64)>, forecasts: &[f64]) -> QueueJob {
-        let mut cumulative_texels = vec![0];
-        let mut cumulative_forecast = vec![0.0];
-        for (s, f) in slices.iter().zip(forecasts) {
-            cumulative_texels.push(cumulative_texels.last().unwrap() + s.2);
-            cumulative_forecast.push(cumulative_forecast.last().unwrap() + f);
-        }
-        QueueJob { slices, cumulative_texels, cumulative_forecast }
-    }
-
-    /// Where `texels` done put the farm in the queue, in slices: the farm
-    /// hands out columns from the start, so the texels done are mostly the
-    /// first ones (those in flight make this approximate).
-    fn position(&self, texels: u64) -> f64 {
-        let c = &self.cumulative_texels;
-        let k = c.partition_point(|&t| t <= texels).saturating_sub(1).min(self.slices.len() - 1);
-        (k as f64 + (texels - c[k].min(texels)) as f64 / self.slices[k].2.max(1) as f64).min(self.slices.len() as f64)
-    }
-
-    fn slice_at(&self, texels: u64) -> (String, usize) {
-        let (sky, index, _) = &self.slices[(self.position(texels) as usize).min(self.slices.len() - 1)];
-        (sky.clone(), *index)
-    }
-
-    /// The forecast core-seconds of the queue's texels done.
-    fn forecast_at(&self, texels: u64) -> f64 {
-        let x = self.position(texels);
-        let k = (x as usize).min(self.slices.len() - 1);
-        let c = &self.cumulative_forecast;
-        c[k] + (x - k as f64) * (c[k + 1] - c[k])
-    }
-}
-
 /// The slices a draft's forecast times: day, low sun, sunset, the horizon,
 /// twilight.
 const PROBE_SLICES: [usize; 5] = [8, 24, 40, 48, 58];
@@ -462,22 +323,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
     // A slice's texels, or with a grid its nodes: what the queue renders.
     let job_texels = |p: &Planned| -> Vec<u64> { p.jobs.iter().map(|v| v.as_ref().map_or(0, |v| (v.width * v.height) as u64)).collect() };
     let texels_to_render: u64 = plan.iter().map(|p| job_texels(p).iter().sum::<u64>()).sum::<u64>() + fog_texels;
-    let tracker = Arc::new(Mutex::new(Tracker {
-        start: Instant::now(),
-        texels_total: texels_to_render,
-        texels_before: 0,
-        slices_total,
-        slices_done: slices_cached,
-        current: (String::new(), 0),
-        job: None,
-        prep_s: 0.0,
-        forecast_total: None,
-        forecast_done: 0.0,
-        cores: opts.cores,
-        cores_known: opts.workers.iter().all(|w| matches!(w, WorkerSpec::Local { .. })),
-        planning: false,
-        sink: opts.events.clone(),
-    }));
+    let cores_known = opts.workers.iter().all(|w| matches!(w, WorkerSpec::Local { .. }));
+    let tracker = Arc::new(Mutex::new(Tracker::new((texels_to_render, slices_total, slices_cached), (opts.cores, cores_known), opts.events.clone())));
     tracker.lock().unwrap().emit(BakeEvent::Planned { skies: plan.len(), slices_total, slices_cached, fog_slices, texels_to_render });
 
     let optics = OpticsCache::default();
@@ -518,7 +365,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         tracker.lock().unwrap().planning = true;
         let (mut total, mut samples) = (0.0, 0u64);
         let pilots = (0..plan.len()).filter(|&k| sessions[k].is_some()).flat_map(to_forecast).filter(|(_, v, _)| pilot_view(v).is_some()).count();
-        let mut piloted = 0;
+        let (mut piloted, mut pilots_saved) = (0, 0);
         for (k, p) in plan.iter().enumerate() {
             let Some(session) = &sessions[k] else { continue };
             for (index, view, fog) in to_forecast(k) {
@@ -527,47 +374,35 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     return Err(BakeError::Cancelled);
                 }
                 tracker.lock().unwrap().current = (p.out.sky.name.clone(), index);
-                // A render's cost is a part per render and per texel (the
-                // job, the first-collision guide, single scattering) and a
-                // part per sample: the pilot and a one-sample render of the
-                // same view tell them apart. Rendered here in one piece, as
-                // the probes below are ([`timed_here`]; a grid's pilot, up to
-                // 316 nodes of 32 samples, is of the size of a farm task's
-                // preparation); its pixels are the very ones the farm would
-                // return.
-                let (image, pilot_core_s, pilot_pixel_s) = timed_here(&session.scene, &pilot, &cancel)?;
-                let (_, one_core_s, one_pixel_s) = timed_here(&session.scene, &View { spp: 1, ..pilot.clone() }, &cancel)?;
-                let texels = (view.width * view.height) as f64;
-                let planned = planned_samples(view, &image);
-                // The pilot's samples past the first, core-seconds, shared
-                // among the texels by their own time on their threads: a
-                // texel whose paths are long (toward the horizon at
-                // twilight) costs more a sample, and it is the noisy one
-                // that takes many. One mean cost a sample, as before,
-                // forecast twilight grid slices 18 to 27 % low (README).
-                let sampling_core_s = (pilot_core_s - one_core_s).max(0.0);
-                let planned_cost = sample_weighted(&planned, &pilot_pixel_s, &one_pixel_s) * sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64;
-                // A fog slice's Fog is its render plus single scattering by
-                // quadrature; so is a slice from a grid, at every texel.
-                let quadrature = match (fog, p.grid) {
-                    // (the Fog's quadrature is at the LUT's size, whatever
-                    // size its Shadowed Fog renders at)
-                    (true, _) => super::fog::time_quadrature(&session.scene, view) * (bake.fog.width * bake.fog.height) as f64 / texels,
-                    (false, Some(g)) => g.time_quadrature(&session.scene, &p.views[index].as_ref().expect("to render").0),
-                    (false, None) => 0.0,
+                // What the pilot's quadrature times: a grid slice's own view,
+                // or the Fog LUT's size.
+                let grid_slice = p.grid.filter(|_| !fog).map(|_| &p.views[index].as_ref().expect("to render").0);
+                let key = pilot_key(&session.job(&pilot).hash, &serde_json::json!({ "grid_slice": grid_slice, "fog_lut": fog.then_some([bake.fog.width, bake.fog.height]) }));
+                let saved = opts.cache.get_value::<PilotForecast>(&key, "pilot");
+                pilots_saved += saved.is_some() as usize;
+                let forecast = match saved {
+                    Some(saved) => saved,
+                    None => {
+                        let after = match (fog, p.grid, grid_slice) {
+                            (true, ..) => AfterQueue::Fog { lut_texels: bake.fog.width * bake.fog.height },
+                            (false, Some(grid), Some(slice)) => AfterQueue::Grid(grid, slice),
+                            _ => AfterQueue::Nothing,
+                        };
+                        let forecast = pilot_forecast(&session.scene, view, &pilot, after, &cancel)?;
+                        opts.cache.put_value(&key, "pilot", &forecast)?;
+                        forecast
+                    }
                 };
-                let fixed = (one_core_s - sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64).max(0.0);
-                let planned: u64 = planned.iter().map(|&n| n as u64).sum();
                 let (f, after) = if fog { (&mut fog_forecasts[k][index], &mut fog_after_queue[k][index]) } else { (&mut forecasts[k][index], &mut after_queue[k][index]) };
-                *f = fixed + planned_cost;
-                *after = quadrature;
-                total += *f + quadrature;
-                samples += planned;
+                *f = forecast.queue_core_seconds;
+                *after = forecast.after_queue_core_seconds;
+                total += *f + *after;
+                samples += forecast.samples;
                 piloted += 1;
-                tracker.lock().unwrap().planned_one("pilots", start, (&p.out.sky.name, index, fog), (piloted, pilots));
+                tracker.lock().unwrap().planned_one("pilots", start, (&p.out.sky.name, index, fog), (piloted, pilots), Some(*f + *after));
             }
         }
-        tracker.lock().unwrap().forecast("pilots", start, total, samples);
+        tracker.lock().unwrap().forecast("pilots", start, (total, samples), pilots_saved);
     } else if (0..plan.len()).flat_map(to_forecast).count() >= MIN_SLICES_TO_PROBE {
         // A fixed sample count (a draft): every texel takes the same
         // samples, but a texel's cost differs from sky to sky (a cloudy
@@ -643,7 +478,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                     per_slice_after.push((index, grid_quadrature + fog_quadrature));
                     per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
                     probed += 1;
-                    tracker.lock().unwrap().planned_one("probes", start, (&sky.name, index, fog), (probed, probes));
+                    tracker.lock().unwrap().planned_one("probes", start, (&sky.name, index, fog), (probed, probes), None);
                 }
                 for (index, view, is_fog) in to_forecast(k).filter(|v| v.2 == fog) {
                     let texels = (view.width * view.height) as f64;
@@ -655,7 +490,7 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
                 }
             }
         }
-        tracker.lock().unwrap().forecast("probes", start, total, samples);
+        tracker.lock().unwrap().forecast("probes", start, (total, samples), 0);
     }
     // Every basis sky's slices to render, in one queue: each sky's strip
     // is one farm job, and a worker done with one sky's columns goes on to
@@ -701,9 +536,8 @@ pub fn render_slices(bake: &BakeFile, opts: &BakeOptions, mie: &MieCache, cancel
         {
             let slices: Vec<(String, usize, u64)> = queued.iter().flat_map(|q| q.slices.iter().map(|&(i, _)| (q.sky.clone(), i, (q.slice_width * q.view.height) as u64))).collect();
             let slice_forecasts: Vec<f64> = queued.iter().flat_map(|q| q.slices.iter().map(|s| s.1)).collect();
-            let mut t = tracker.lock().unwrap();
-            t.current = (slices[0].0.clone(), slices[0].1);
-            t.job = Some(QueueJob::new(slices, &slice_forecasts));
+            let resumed_texels = queued.iter().map(|q| q.resumed as u64 * q.view.height as u64).sum();
+            tracker.lock().unwrap().start_queue(QueueJob::new(slices, &slice_forecasts), resumed_texels);
         }
         let start = Instant::now();
         let outcome = farm.render_parts(parts, cancel.clone()).map_err(|source| queue_error(&queued, source))?;
@@ -907,6 +741,76 @@ fn sample_weighted(planned: &[u32], pilot_s: &[f64], one_s: &[f64]) -> f64 {
     }
 }
 
+/// A pilot's forecast of a view to render, kept in the cache folder
+/// ([`pilot_key`]) so that a bake stopped and run again plans from it
+/// instead of rendering every pilot again (the sunny skies' final bake:
+/// 252 pilots, 9 minutes on this project's 2-core machine).
+#[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
+struct PilotForecast {
+    /// Core-seconds of the view's render in the bake's queue.
+    queue_core_seconds: f64,
+    /// Core-seconds of the quadrature after the queue (a grid slice's or
+    /// a fog slice's single scattering).
+    after_queue_core_seconds: f64,
+    /// Samples the view's texels will take.
+    samples: u64,
+}
+
+/// What follows a view's render in the bake, at every texel of its slice:
+/// single scattering by quadrature, for a fog slice's Fog (at the LUT's
+/// size, whatever size its Shadowed Fog renders at) or a slice from a
+/// grid of multiple scattering.
+enum AfterQueue<'a> {
+    Nothing,
+    Fog { lut_texels: usize },
+    Grid(MsGrid, &'a View),
+}
+
+/// The cache key of a pilot's forecast: the pilot's farm job (optics,
+/// renderer source, view), what its quadrature times, the source of the
+/// forecast's code, and this machine, its name and threads: the times are
+/// this machine's (another machine, or another thread count, plans again).
+fn pilot_key(pilot_job_hash: &str, quadrature_of: &serde_json::Value) -> String {
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").or_else(|_| std::env::var("COMPUTERNAME")).unwrap_or_default();
+    let key = serde_json::json!({
+        "pilot": pilot_job_hash,
+        "quadrature": quadrature_of,
+        "forecast_source": env!("SKY_FORECAST_SOURCE"),
+        "host": host.trim(),
+        "threads": rayon::current_num_threads(),
+    });
+    blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
+}
+
+/// The forecast of `view`'s adaptive render from its `pilot` rendered and
+/// timed here, with the quadrature `after` it.
+fn pilot_forecast(scene: &Scene, view: &View, pilot: &View, after: AfterQueue, cancel: &AtomicBool) -> Result<PilotForecast, BakeError> {
+    // A render's cost is a part per render and per texel (the job, the
+    // first-collision guide, single scattering) and a part per sample: the
+    // pilot and a one-sample render of the same view tell them apart.
+    // Rendered here in one piece, as the probes are ([`timed_here`]; a
+    // grid's pilot, up to 316 nodes of 32 samples, is of the size of a farm
+    // task's preparation); its pixels are the very ones the farm would
+    // return.
+    let (image, pilot_core_s, pilot_pixel_s) = timed_here(scene, pilot, cancel)?;
+    let (_, one_core_s, one_pixel_s) = timed_here(scene, &View { spp: 1, ..pilot.clone() }, cancel)?;
+    let planned = planned_samples(view, &image);
+    // The pilot's samples past the first, core-seconds, shared among the
+    // texels by their own time on their threads: a texel whose paths are
+    // long (toward the horizon at twilight) costs more a sample, and it is
+    // the noisy one that takes many. One mean cost a sample, as before,
+    // forecast twilight grid slices 18 to 27 % low (README).
+    let sampling_core_s = (pilot_core_s - one_core_s).max(0.0);
+    let planned_cost = sample_weighted(&planned, &pilot_pixel_s, &one_pixel_s) * sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64;
+    let fixed = (one_core_s - sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64).max(0.0);
+    let after_queue_core_seconds = match after {
+        AfterQueue::Fog { lut_texels } => super::fog::time_quadrature(scene, view) * lut_texels as f64 / (view.width * view.height) as f64,
+        AfterQueue::Grid(grid, slice) => grid.time_quadrature(scene, slice),
+        AfterQueue::Nothing => 0.0,
+    };
+    Ok(PilotForecast { queue_core_seconds: fixed + planned_cost, after_queue_core_seconds, samples: planned.iter().map(|&n| n as u64).sum() })
+}
+
 /// Renders `view` on this process's threads in one piece: its image, its
 /// cost in core-seconds (the wall time times the threads) and each pixel's
 /// seconds on its thread. How pilots and probes are timed: on a farm a
@@ -921,39 +825,6 @@ fn timed_here(scene: &Scene, view: &View, cancel: &AtomicBool) -> Result<(Image,
 /// The event of a slice found in the cache (or the same as an earlier one).
 fn cached_slice(sky: &str, index: usize, s: &RenderedSlice) -> BakeEvent {
     BakeEvent::Slice { sky: sky.to_string(), index, sun_zenith_deg: s.sun_zenith_deg, cached: true, core_seconds: s.core_seconds, forecast_core_seconds: None, mean_samples: s.mean_samples() }
-}
-
-/// The farm options of a bake: the caller's, with the farm's events turned
-/// into the bake's (progress over the whole bake; the rest tagged with the
-/// slice).
-fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) -> Options {
-    let mut farm = opts.farm.clone();
-    let t = tracker.clone();
-    farm.events = Some(EventSink::new(move |e| {
-        let mut t = t.lock().unwrap();
-        match e {
-            FarmEvent::Progress(_) if t.planning => {}
-            FarmEvent::Progress(p) => {
-                // The farm's threads, once a worker said its own: what the
-                // forecast's core-seconds are shared among, a worker yet to
-                // say counted at the others' mean.
-                let serving: Vec<usize> = p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).collect();
-                let known: Vec<usize> = serving.iter().copied().filter(|&n| n > 0).collect();
-                if !known.is_empty() {
-                    let sum: usize = known.iter().sum();
-                    t.cores = sum + ((serving.len() - known.len()) * sum).div_ceil(known.len());
-                    t.cores_known = true;
-                }
-                let p = t.progress(p.pixels_done, p.stalled.clone());
-                t.emit(BakeEvent::Progress(p));
-            }
-            other => {
-                let (sky, index) = t.current.clone();
-                t.emit(BakeEvent::Farm { sky, index, farm: other.clone() })
-            }
-        }
-    }));
-    farm
 }
 
 /// What a job of the bake's queue renders.

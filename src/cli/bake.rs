@@ -116,10 +116,11 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                     eprintln!("sky bake-luts: {sky}: preparing the optics");
                 }
             }
-            BakeEvent::Forecast { from, core_seconds, samples, planning_core_seconds } => {
-                say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them)", core_seconds / 3600.0, planning_core_seconds / 3600.0));
+            BakeEvent::Forecast { from, core_seconds, samples, planning_core_seconds, saved } => {
+                let saved = if *saved > 0 { format!("; {saved} of them saved in the cache folder by an earlier run") } else { String::new() };
+                say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them{saved})", core_seconds / 3600.0, planning_core_seconds / 3600.0));
             }
-            BakeEvent::Planning { from, sky, index, fog, done, total, elapsed_s, eta_s } => {
+            BakeEvent::Planning { from, sky, index, fog, done, total, elapsed_s, eta_s, .. } => {
                 let what = format!("planning: {from} {done}/{total} ({sky}:{}{index}), ETA {}", if *fog { "fog:" } else { "" }, fmt_duration(*eta_s));
                 match style {
                     Style::Bars => {
