@@ -67,7 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
     println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
     println!("cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}", source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"]));
-    println!("cargo:rustc-env=SKY_FORECAST_SOURCE={}", source_hash(&["src/bake/run.rs", "src/bake/fog.rs", "src/bake/ms_grid.rs"]));
+    println!("cargo:rustc-env=SKY_FORECAST_SOURCE={}", source_hash(&["src/bake/forecast.rs", "src/bake/fog.rs", "src/bake/ms_grid.rs"]));
     let fds = protox::compile([proto], ["proto"])?;
     tonic_prost_build::configure().build_client(true).build_server(true).compile_fds(fds)?;
     Ok(())

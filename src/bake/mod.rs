@@ -10,6 +10,7 @@ pub mod cache;
 pub mod file;
 pub mod fog;
 pub mod fog_resample;
+mod forecast;
 pub mod lighting;
 pub mod ms_grid;
 pub mod openjd;
