@@ -7,6 +7,10 @@ bake's wall time, with the worst error before a tenth of it (issue 12: "an
 ETA that is right to 10 % before the bake is a tenth done").
 
     scripts/bake_eta.py progress.jsonl [--threads N]
+    scripts/bake_eta.py run1.jsonl run2.jsonl ... --threads N
+
+Given the progress of several runs of one bake (each resuming the last),
+it reports each and sums their rendering time and texels.
 
 With the farm's threads (`--threads`), and pilots that carried their
 slice's forecast (`planning` events), it also prints the queue's pace
@@ -34,18 +38,43 @@ def main():
             print("--threads needs a whole number", file=sys.stderr)
             return 2
         del args[i : i + 2]
-    if len(args) != 1:
+    if not args:
         print(__doc__.strip(), file=sys.stderr)
         return 2
-    src = sys.stdin if args[0] == "-" else open(args[0], encoding="utf-8")
+    runs = []
+    for path in args:
+        if len(args) > 1:
+            print(f"== {path}")
+        events = read(path)
+        if events is None:
+            return 1
+        runs.append(report(events, threads))
+    if len(args) > 1:
+        # Runs of one bake, each resuming the last: the queue's rendering
+        # time (from its first progress line to its last) and texels.
+        wall = sum(r[0] for r in runs)
+        texels = sum(r[1] for r in runs)
+        cost = f", {wall * threads:.0f} core-seconds on {threads} threads" if threads else ""
+        print(f"== {len(runs)} runs: {wall:.0f} s of rendering{cost}, {texels} texels")
+    return 0
+
+
+def read(path):
+    """The JSON events of a --json-progress file (None after an error)."""
+    src = sys.stdin if path == "-" else open(path, encoding="utf-8")
     events = []
     for number, line in enumerate(src, 1):
         if line.startswith("{"):
             try:
                 events.append(json.loads(line))
             except json.JSONDecodeError as e:
-                print(f"{args[0]}:{number}: not JSON: {e}", file=sys.stderr)
-                return 1
+                print(f"{path}:{number}: not JSON: {e}", file=sys.stderr)
+                return None
+    return events
+
+
+def report(events, threads):
+    """Prints one run's report; returns its rendering seconds and texels."""
     forecast = next((e for e in events if e["event"] == "forecast"), None)
     progress = [e for e in events if e["event"] == "progress" and e.get("eta_s") is not None]
     slices = [e for e in events if e["event"] == "slice" and not e.get("cached")]
@@ -64,7 +93,7 @@ def main():
         queue_pace(events, threads)
     if not progress:
         print("no progress event with an ETA")
-        return 0
+        return (0.0, 0)
     start = progress[0]["elapsed_s"] - 0.0
     last = progress[-1]["elapsed_s"]
     ends = [(p["elapsed_s"], p["elapsed_s"] + p["eta_s"]) for p in progress]
@@ -83,7 +112,7 @@ def main():
         step = max(1, len(ends) // 10)
         for t, end in ends[::step] + [ends[-1]]:
             print(f"  t = {t:.0f} s: {end:.0f} s ({100 * (end / ends[0][1] - 1):+.1f} % against the first, at {start:.0f} s)")
-    return 0
+    return (last - start, progress[-1]["texels_done"] - progress[0]["texels_done"])
 
 
 def queue_pace(events, threads, group=8):
