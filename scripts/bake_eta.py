@@ -17,7 +17,9 @@ slice's forecast (`planning` events), it also prints the queue's pace
 group by group of slices while it renders: the wall time between the
 progress reaching a slice and the slice eight further on, times the
 threads, against the forecast of those slices (the queue's slices are
-cached only at its end, so their `slice` events come late).
+cached only at its end, so their `slice` events come late). A pilot's
+forecast counts the quadrature after the queue too (about 2 % of the
+sunny skies' final bake), so the pace reads that much under it.
 
 The real end is the last progress event's elapsed time, so run it on a
 bake that finished; on one still running it says so and reports the
