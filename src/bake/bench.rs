@@ -234,14 +234,20 @@ fn measure(
         ref_rel.push(s);
         // The texel's own per-sample relative variance, relative to the
         // reference's Y (the estimate's own Y can be 0 in a dark texel).
+        // A texel whose samples found no light is priced at the cap, as
+        // `adaptive::samples_for` takes a pilot that saw none.
         let v = n * (p.xyz_stderr[1] / ry).powi(2);
-        own += v;
-        own_each.push(v);
+        if p.xyz[1] > 0.0 {
+            own += v;
+            own_each.push(Some(v));
+        } else {
+            own_each.push(None);
+        }
     }
     let texels = own_each.len();
     let m = texels.max(1) as f64;
     let rel_var_vs_reference = (n * (e2 - s2) / m).max(0.0);
-    let rel_var_own = own / m;
+    let rel_var_own = own / own_each.iter().flatten().count().max(1) as f64;
     let kappa = if rel_var_own > 0.0 { rel_var_vs_reference / rel_var_own } else { 1.0 };
     let subset = (img.width * img.height) as f64;
     let core_seconds_per_path = ((core_seconds - one_core_seconds) / (subset * (n - 1.0))).max(0.0);
@@ -252,10 +258,13 @@ fn measure(
     // samples between its floor and what the cap leaves (and without the
     // cap: what 1 % takes).
     let left = cap.saturating_sub(ADAPTIVE_PILOT_SPP) as f64;
+    // A texel without light takes the cap, and to 1 % what the slice's
+    // mean variance takes.
     for v in &own_each {
-        let want = (kappa * v / target2).ceil();
-        capped += (want > left) as usize;
-        samples += ADAPTIVE_PILOT_SPP as f64 + want.min(left).max((ADAPTIVE_MIN_SPP as f64).min(left));
+        let want = (kappa * v.unwrap_or(rel_var_own) / target2).ceil();
+        capped += (v.is_none() || want > left) as usize;
+        let at_cap = if v.is_some() { want.min(left) } else { left };
+        samples += ADAPTIVE_PILOT_SPP as f64 + at_cap.max((ADAPTIVE_MIN_SPP as f64).min(left));
         uncapped += ADAPTIVE_PILOT_SPP as f64 + want.max(ADAPTIVE_MIN_SPP as f64);
     }
     let samples_to_target = uncapped / m;
