@@ -4,37 +4,21 @@
 #
 #   scripts/scattering_orders.sh [SKY...]      (default: clear hazed)
 #
-# The kernel has no order filter of its own (it would be a branch in the
-# hottest loop for a diagnostic), so this applies
-# scripts/scattering-orders.patch to src/render/kernel.rs, builds, copies the
-# binary to target/scattering-orders/ and takes the patch out again (so the
-# next plain build recompiles the kernel). The patched kernel keeps only the
+# The kernel has no order filter of its own: scripts/patched_build.sh builds
+# one with scripts/scattering-orders.patch, whose kernel keeps only the
 # estimates of the orders in SKY_ORDERS=MIN-MAX (the sun estimate at a
 # path's n-th vertex is order n; the skylight estimates there, toward the
-# lit air, order n + 1). Single scattering stays the
-# quadrature's in every run. It then renders ten directions at sun zenith
-# 91, 93, 96 and 99 degrees, 4096 samples each, four times: every order,
-# order 2 only, orders 3 and up, and none (the quadrature alone), and prints
-# each direction's shares of Y and the per-sample relative variance of each
-# part against the whole's Y. About 3 minutes on 2 cores after the build.
+# lit air, order n + 1). Single scattering stays the quadrature's in every
+# run. It then renders ten directions at sun zenith 91, 93, 96 and 99
+# degrees, 4096 samples each, four times: every order, order 2 only,
+# orders 3 and up, and none (the quadrature alone), and prints each
+# direction's shares of Y and the per-sample relative variance of each part
+# against the whole's Y. About 3 minutes on 2 cores after the build.
 set -eu
 root=$(git rev-parse --show-toplevel)
 cd "$root"
 work=target/scattering-orders
-git diff --quiet -- src/render/kernel.rs || {
-    echo "src/render/kernel.rs has changes of its own: commit or stash them first" >&2
-    exit 1
-}
-git apply scripts/scattering-orders.patch || {
-    echo "scripts/scattering-orders.patch no longer applies to src/render/kernel.rs: update it" >&2
-    exit 1
-}
-trap 'git checkout -- src/render/kernel.rs' EXIT
-cargo build --release --bin sky
-mkdir -p "$work"
-cp target/release/sky "$work/sky"
-git checkout -- src/render/kernel.rs
-trap - EXIT
+scripts/patched_build.sh scripts/scattering-orders.patch "$work/sky"
 sky="$root/$work/sky"
 out="$work/runs"
 mkdir -p "$out"
