@@ -40,7 +40,7 @@ test: build ktx-parse openjd lavapipe cxx
 # The GPU preview's golden pictures (tests/golden/, see its README) drawn
 # again by the current build: only for a change meant to alter them.
 golden-update: build lavapipe
-	SKY_GOLDEN_UPDATE=1 WGPU_BACKEND=vulkan NODEVICE_SELECT=1 cargo test --release --locked --features preview --test preview the_preview_draws_its_golden_scenes
+	SKY_GOLDEN_UPDATE=1 WGPU_BACKEND=vulkan NODEVICE_SELECT=1 cargo test --release --locked --features preview --test suite -- preview::the_preview_draws_its_golden_scenes
 
 # A C++ compiler for the tests' FLIP (the nv-flip crate builds NVIDIA's
 # C++ reference), from Debian as root where the machine has none.
@@ -199,12 +199,12 @@ final-cost: build
 
 # The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
 validate: build
-	$(CARGO) test --release --locked --test disort -- --ignored --nocapture
+	$(CARGO) test --release --locked --test suite -- disort:: --ignored --nocapture
 
 # Long fuzzing of the atmosphere loader and of a worker's farm-message
 # checks (tests/fuzz.rs; `make test` runs a short version of each).
 fuzz:
-	$(CARGO) test --release --locked --test fuzz -- --ignored --nocapture
+	$(CARGO) test --release --locked --test suite -- fuzz:: --ignored --nocapture
 
 # The README's blue mountains: the two sunny basis skies and their fog LUTs at 32 samples a texel
 # (bakes/fog-look.toml, about 8 minutes on 2 cores), decoded with ridges at 2 to 100 km at three

@@ -17,11 +17,21 @@
 use std::path::{Path, PathBuf};
 
 /// The files and folders (recursively) whose content names the renderer.
-const RENDER_SOURCES: [&str; 8] = ["src/render", "src/atmosphere", "src/mie", "src/lut/mapping.rs", "src/spectrum.rs", "src/table.rs", "src/session.rs", "Cargo.lock"];
+const RENDER_SOURCES: [&str; 8] = [
+    "src/render",
+    "src/atmosphere",
+    "src/mie",
+    "src/directions",
+    "src/spectrum.rs",
+    "src/table.rs",
+    "src/session.rs",
+    "Cargo.lock",
+];
 
 fn files(path: &Path, out: &mut Vec<PathBuf>) {
     if path.is_dir() {
-        let mut entries: Vec<PathBuf> = std::fs::read_dir(path).map(|r| r.flatten().map(|e| e.path()).collect()).unwrap_or_default();
+        let mut entries: Vec<PathBuf> =
+            std::fs::read_dir(path).map(|r| r.flatten().map(|e| e.path()).collect()).unwrap_or_default();
         entries.sort();
         for e in entries {
             files(&e, out);
@@ -66,8 +76,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed={proto}");
     println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
     println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
-    println!("cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}", source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"]));
-    println!("cargo:rustc-env=SKY_FORECAST_SOURCE={}", source_hash(&["src/bake/forecast.rs", "src/bake/fog.rs", "src/bake/ms_grid.rs"]));
+    println!(
+        "cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}",
+        source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"])
+    );
+    println!(
+        "cargo:rustc-env=SKY_FORECAST_SOURCE={}",
+        source_hash(&["src/bake/forecast.rs", "src/bake/fog.rs", "src/bake/ms_grid.rs"])
+    );
     let fds = protox::compile([proto], ["proto"])?;
     tonic_prost_build::configure().build_client(true).build_server(true).compile_fds(fds)?;
     Ok(())

@@ -45,7 +45,8 @@ fn load(dir: &str) -> Result<Vec<RenderedSlice>, String> {
 }
 
 fn median_rel(a: &RenderedSlice, b: &RenderedSlice) -> f64 {
-    let mut d: Vec<f64> = a.xyz.iter().zip(&b.xyz).map(|(x, y)| ((x[1] - y[1]) / y[1]).abs()).filter(|d| d.is_finite()).collect();
+    let mut d: Vec<f64> =
+        a.xyz.iter().zip(&b.xyz).map(|(x, y)| ((x[1] - y[1]) / y[1]).abs()).filter(|d| d.is_finite()).collect();
     d.sort_by(f64::total_cmp);
     d.get(d.len() / 2).copied().unwrap_or(f64::INFINITY)
 }
@@ -127,7 +128,10 @@ fn main() {
             println!("(A's slice resampled from {} x {})", x.width, x.height);
         }
         let x = &sky::bake::fog_resample::resample_shadowed(x, w, h);
-        let partner = sb.iter().filter(|y| (y.sun_zenith_deg - x.sun_zenith_deg).abs() < 1e-9 && (y.width, y.height) == (w, h)).min_by(|p, q| median_rel(x, p).total_cmp(&median_rel(x, q)));
+        let partner = sb
+            .iter()
+            .filter(|y| (y.sun_zenith_deg - x.sun_zenith_deg).abs() < 1e-9 && (y.width, y.height) == (w, h))
+            .min_by(|p, q| median_rel(x, p).total_cmp(&median_rel(x, q)));
         if let Some(y) = partner {
             compare(x, y, blocks);
         }

@@ -2,23 +2,33 @@
 //! the "skysim" pipeline of Polyphony Digital's GDC 2023 talk "Realistic
 //! Real-time Sky Dome Rendering in Gran Turismo 7".
 //!
-//! - [`atmosphere`]: the measured atmosphere model (`atmospheres/*.toml`) and
-//!   its optical properties;
-//! - [`mie`]: Mie theory (BHMIE), log-normal size distributions, phase tables;
+//! The modules by layer, each importing only from the layers below it:
+//!
+//! - ground floor: [`directions`] (the world frame, cameras, the talk's LUT
+//!   mappings), [`colour`] (colour spaces and 3x3 matrices), [`stats`]
+//!   (percentiles, the Šidák family of the tests), [`atomic`] (whole-file
+//!   writes), [`lru`], [`table`] (the data files of `atmospheres/data/`),
+//!   [`spectrum`] (colour matching functions and the solar spectrum),
+//!   [`plot`] (PNG plots for people);
+//! - physics: [`mie`] (BHMIE, log-normal size distributions, phase tables),
+//!   [`atmosphere`] (the measured atmosphere model and its optics);
 //! - [`render`]: the spectral path tracer behind `sky render`;
 //! - [`farm`]: the render farm (`sky worker` and the distributed `sky render`);
+//!   [`session`]: prepared optics by hash, and views rendered with them,
+//!   locally or on the farm;
+//! - [`lut`]: the runtime contract an engine port reads: the manifest, the
+//!   weather rule, the reference decoder, the texture codecs;
 //! - [`bake`]: `sky bake-luts`, the basis-sky LUTs rendered, cached and packed;
-//! - [`lut`]: the talk's adaptive LUT mappings, the weather rule and the reference decoder;
-//! - [`look`]: the sun at a time of day and preview timelines;
-//! - `preview` (feature `preview`): the LUTs, fog and clouds on a GPU through wgpu;
-//! - [`spectrum`]: colour matching functions and the solar spectrum;
-//! - [`session`]: prepared optics by hash, and views rendered with them;
-//! - [`lru`]: the memory-bounded cache that keeps prepared optics;
-//! - [`table`]: the tabulated data files of `atmospheres/data/`;
-//! - [`plot`]: PNG plots for people.
+//! - [`study`]: the LUTs measured: `sky lut verify`, interpolation studies,
+//!   error pictures, the bake's benchmarks;
+//! - [`look`]: the sun at a time of day and preview timelines; `preview`
+//!   (feature `preview`): the LUTs, fog and clouds on a GPU through wgpu.
 
 pub mod atmosphere;
+pub mod atomic;
 pub mod bake;
+pub mod colour;
+pub mod directions;
 pub mod farm;
 pub mod look;
 pub mod lru;
@@ -30,6 +40,8 @@ pub mod preview;
 pub mod render;
 pub mod session;
 pub mod spectrum;
+pub mod stats;
+pub mod study;
 pub mod table;
 
 /// Version of this build, recorded in outputs.

@@ -78,7 +78,12 @@ impl<V> MemoryLru<V> {
     fn evict(g: &mut Inner<V>, budget: u64) {
         while g.bytes > budget {
             // The caller of `insert` holds its value, so it is never the victim.
-            let victim = g.entries.iter().filter(|(_, e)| Arc::strong_count(&e.value) == 1).min_by_key(|(_, e)| e.used).map(|(k, _)| k.clone());
+            let victim = g
+                .entries
+                .iter()
+                .filter(|(_, e)| Arc::strong_count(&e.value) == 1)
+                .min_by_key(|(_, e)| e.used)
+                .map(|(k, _)| k.clone());
             let Some(k) = victim else { break };
             let e = g.entries.remove(&k).unwrap();
             g.bytes -= e.bytes;

@@ -92,8 +92,16 @@ fn ensure_font() {
 }
 
 fn palette(i: usize) -> RGBColor {
-    const C: [RGBColor; 8] =
-        [RGBColor(31, 119, 180), RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(255, 127, 14), RGBColor(148, 103, 189), RGBColor(140, 86, 75), RGBColor(227, 119, 194), RGBColor(23, 190, 207)];
+    const C: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(214, 39, 40),
+        RGBColor(44, 160, 44),
+        RGBColor(255, 127, 14),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
+    ];
     C[i % C.len()]
 }
 
@@ -122,8 +130,13 @@ fn bounds(series: &[Series], scale_x: Scale, scale_y: Scale) -> ((f64, f64), (f6
 
 macro_rules! draw_chart {
     ($root:expr, $axes:expr, $series:expr, $xr:expr, $yr:expr) => {{
-        let mut chart =
-            ChartBuilder::on($root).caption($axes.title, ("sans-serif", 26)).margin(16).x_label_area_size(48).y_label_area_size(80).build_cartesian_2d($xr, $yr).map_err(|e| e.to_string())?;
+        let mut chart = ChartBuilder::on($root)
+            .caption($axes.title, ("sans-serif", 26))
+            .margin(16)
+            .x_label_area_size(48)
+            .y_label_area_size(80)
+            .build_cartesian_2d($xr, $yr)
+            .map_err(|e| e.to_string())?;
         chart
             .configure_mesh()
             .x_desc($axes.x_label)
@@ -145,7 +158,9 @@ macro_rules! draw_chart {
                     chart.draw_series(LineSeries::new(pts, style)).map_err(|e| e.to_string())?
                 };
                 if j == 0 {
-                    drawn.label(s.label.clone()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(width)));
+                    drawn
+                        .label(s.label.clone())
+                        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(width)));
                 }
             }
         }

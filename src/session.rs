@@ -12,7 +12,7 @@
 
 use crate::atmosphere::{Atmosphere, Bundle};
 use crate::farm::coordinator::{self, Farm, FarmError, FarmPart, Options, PartsOutcome, WorkerSpec};
-use crate::farm::job::{FarmJob, Optics};
+use crate::farm::job::{optics_hash, FarmJob, Optics};
 use crate::farm::journal::Journal;
 use crate::farm::proto;
 use crate::lru::MemoryLru;
@@ -23,12 +23,15 @@ use std::sync::atomic::AtomicBool;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-/// The name of an atmosphere's optics for one spectral setting: BLAKE3 of
-/// the atmosphere's content hash (the file and every data file it reads)
-/// and the spectral settings.
-pub fn optics_hash(atm: &Atmosphere, spectral: &SpectralSettings) -> String {
-    let key = serde_json::json!({ "atmosphere": atm.content_hash, "spectral": spectral, "build": crate::VERSION, "render_source": crate::RENDER_SOURCE });
-    blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
+/// What the layers above see of the farm (the bake, `sky lut verify`): the
+/// workers and options a session renders on, the farm's events, errors and
+/// column journals. They reach the farm through sessions and these names
+/// only.
+pub mod farm {
+    pub use crate::farm::build_version;
+    pub use crate::farm::coordinator::{FarmError, FarmPart, Options, WorkerSpec};
+    pub use crate::farm::events::{EventSink, FarmEvent};
+    pub use crate::farm::journal::{Header, Journal, JournalError};
 }
 
 /// Prepared optics by [`optics_hash`], at most a budget of bytes of them
@@ -53,7 +56,13 @@ impl OpticsCache {
     /// The optics of `atm` for `spectral`, prepared (on the current rayon
     /// pool, calling `on_step` after each wavelength) only if the cache does
     /// not hold them yet.
-    pub fn get(&self, atm: &Atmosphere, spectral: &SpectralSettings, mie: &MieCache, on_step: &(dyn Fn() + Sync)) -> Arc<Scene> {
+    pub fn get(
+        &self,
+        atm: &Atmosphere,
+        spectral: &SpectralSettings,
+        mie: &MieCache,
+        on_step: &(dyn Fn() + Sync),
+    ) -> Arc<Scene> {
         let h = optics_hash(atm, spectral);
         if let Some(s) = self.scenes.get(&h) {
             return s;
@@ -112,8 +121,16 @@ impl SharedFarm {
     pub fn render_parts(&self, parts: Vec<FarmPart>, cancel: Arc<AtomicBool>) -> Result<PartsOutcome, FarmError> {
         let mut farm = self.farm.lock().unwrap_or_else(|e| e.into_inner());
         if farm.is_none() {
-            let workers = if self.workers.is_empty() { vec![WorkerSpec::Local { threads: rayon::current_num_threads() }] } else { self.workers.clone() };
-            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().map_err(FarmError::Runtime)?;
+            let workers = if self.workers.is_empty() {
+                vec![WorkerSpec::Local { threads: rayon::current_num_threads() }]
+            } else {
+                self.workers.clone()
+            };
+            let rt = tokio::runtime::Builder::new_multi_thread()
+                .worker_threads(2)
+                .enable_all()
+                .build()
+                .map_err(FarmError::Runtime)?;
             *farm = Some((rt, Farm::new(workers)));
         }
         let (rt, farm) = farm.as_mut().expect("made above");
@@ -166,7 +183,15 @@ impl Session {
     }
 
     /// A session rendering on `farm`, which other sessions may share.
-    pub fn on_farm(atmosphere: Atmosphere, bundle: Bundle, spectral: SpectralSettings, cache: &OpticsCache, mie: &MieCache, farm: Arc<SharedFarm>, on_step: &(dyn Fn() + Sync)) -> Session {
+    pub fn on_farm(
+        atmosphere: Atmosphere,
+        bundle: Bundle,
+        spectral: SpectralSettings,
+        cache: &OpticsCache,
+        mie: &MieCache,
+        farm: Arc<SharedFarm>,
+        on_step: &(dyn Fn() + Sync),
+    ) -> Session {
         let scene = cache.get(&atmosphere, &spectral, mie, on_step);
         let optics = Arc::new(Optics::new(&atmosphere, bundle, scene.clone()));
         Session { atmosphere, spectral, scene, optics, farm }
@@ -184,7 +209,13 @@ impl Session {
 
     /// Renders one view of `job` (from [`Session::job`]), with columns of
     /// an earlier run already in `resumed` and new ones going to `journal`.
-    pub fn render(&self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, cancel: Arc<AtomicBool>) -> Result<Rendered, FarmError> {
+    pub fn render(
+        &self,
+        job: Arc<FarmJob>,
+        resumed: BTreeMap<u32, proto::Tile>,
+        journal: Option<Journal>,
+        cancel: Arc<AtomicBool>,
+    ) -> Result<Rendered, FarmError> {
         let (width, height) = (job.settings.view.width, job.settings.view.height);
         let outcome = self.farm.render_parts(vec![FarmPart { job, resumed, journal }], cancel)?;
         Ok(Rendered { image: image_of_columns(&outcome.parts[0], width, height), stats: outcome.stats })

@@ -29,7 +29,8 @@ impl Cmf {
     pub fn cie1931() -> &'static Cmf {
         static CMF: OnceLock<Cmf> = OnceLock::new();
         CMF.get_or_init(|| {
-            let t = Table::parse(Path::new("atmospheres/data/cie1931_2deg_cmf.csv"), CMF_CSV).expect("embedded CMF table is valid");
+            let t = Table::parse(Path::new("atmospheres/data/cie1931_2deg_cmf.csv"), CMF_CSV)
+                .expect("embedded CMF table is valid");
             Cmf {
                 wavelength_nm: t.column("wavelength_nm").unwrap().to_vec(),
                 x_bar: t.column("x_bar").unwrap().to_vec(),
@@ -45,7 +46,11 @@ impl Cmf {
             return [0.0; 3];
         }
         let w = &self.wavelength_nm;
-        [interp_linear(w, &self.x_bar, wavelength_nm), interp_linear(w, &self.y_bar, wavelength_nm), interp_linear(w, &self.z_bar, wavelength_nm)]
+        [
+            interp_linear(w, &self.x_bar, wavelength_nm),
+            interp_linear(w, &self.y_bar, wavelength_nm),
+            interp_linear(w, &self.z_bar, wavelength_nm),
+        ]
     }
 
     /// ∫ S(λ) x̄(λ) dλ etc. as a plain sum over the table's 1 nm grid

@@ -26,7 +26,11 @@ pub struct Table {
 impl Table {
     /// Reads a table from disk.
     pub fn read(path: &Path) -> Result<Table, TableError> {
-        let text = std::fs::read_to_string(path).map_err(|e| TableError { path: path.to_path_buf(), line: None, message: format!("cannot read data file: {e}") })?;
+        let text = std::fs::read_to_string(path).map_err(|e| TableError {
+            path: path.to_path_buf(),
+            line: None,
+            message: format!("cannot read data file: {e}"),
+        })?;
         Table::parse(path, &text)
     }
 
@@ -53,10 +57,15 @@ impl Table {
                 Some(names) => {
                     let fields: Vec<&str> = line.split(',').map(str::trim).collect();
                     if fields.len() != names.len() {
-                        return Err(err(line_no, format!("expected {} values ({}), found {}", names.len(), names.join(","), fields.len())));
+                        return Err(err(
+                            line_no,
+                            format!("expected {} values ({}), found {}", names.len(), names.join(","), fields.len()),
+                        ));
                     }
                     for (c, f) in fields.iter().enumerate() {
-                        let v: f64 = f.parse().map_err(|_| err(line_no, format!("`{f}` is not a number (column {})", names[c])))?;
+                        let v: f64 = f
+                            .parse()
+                            .map_err(|_| err(line_no, format!("`{f}` is not a number (column {})", names[c])))?;
                         if !v.is_finite() {
                             return Err(err(line_no, format!("`{f}` is not finite (column {})", names[c])));
                         }
@@ -65,7 +74,11 @@ impl Table {
                 }
             }
         }
-        let columns = columns.ok_or_else(|| TableError { path: path.to_path_buf(), line: None, message: "no header line and no data".into() })?;
+        let columns = columns.ok_or_else(|| TableError {
+            path: path.to_path_buf(),
+            line: None,
+            message: "no header line and no data".into(),
+        })?;
         if data[0].is_empty() {
             return Err(TableError { path: path.to_path_buf(), line: None, message: "table has no rows".into() });
         }
@@ -86,7 +99,17 @@ impl Table {
         let x = &self.data[0];
         for i in 1..x.len() {
             if x[i] <= x[i - 1] {
-                return Err(TableError { path: self.path.clone(), line: None, message: format!("{} must strictly increase (row {}: {} after {})", self.columns[0], i + 1, x[i], x[i - 1]) });
+                return Err(TableError {
+                    path: self.path.clone(),
+                    line: None,
+                    message: format!(
+                        "{} must strictly increase (row {}: {} after {})",
+                        self.columns[0],
+                        i + 1,
+                        x[i],
+                        x[i - 1]
+                    ),
+                });
             }
         }
         Ok(())
@@ -148,7 +171,9 @@ mod tests {
 
     #[test]
     fn parses_comments_header_rows() {
-        let t = Table::parse(Path::new("t.csv"), "# title\n# units: nm\nwavelength_nm,n,k\n400,1.33,1e-9\n500,1.34,2e-9\n").unwrap();
+        let t =
+            Table::parse(Path::new("t.csv"), "# title\n# units: nm\nwavelength_nm,n,k\n400,1.33,1e-9\n500,1.34,2e-9\n")
+                .unwrap();
         assert_eq!(t.columns, vec!["wavelength_nm", "n", "k"]);
         assert_eq!(t.column("k").unwrap(), &[1e-9, 2e-9]);
         let f = t.function("n").unwrap();

@@ -3,9 +3,7 @@
 //! gets located errors; and random mutations of the shipped files never
 //! panic the loader and always get errors that name a line.
 
-mod common;
-
-use common::SplitMix64 as Rng;
+use crate::common::SplitMix64 as Rng;
 use sky::atmosphere::Atmosphere;
 use std::path::{Path, PathBuf};
 
@@ -14,7 +12,11 @@ fn root() -> PathBuf {
 }
 
 fn shipped() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("atmospheres")).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    let mut v: Vec<PathBuf> = std::fs::read_dir(root().join("atmospheres"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
     v.sort();
     v
 }
@@ -54,7 +56,11 @@ fn content_hash_follows_referenced_data() {
 fn broken_files_get_located_errors() {
     let dir = root().join("tests/bad_atmospheres");
     let mut n = 0;
-    let mut entries: Vec<PathBuf> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
     entries.sort();
     for f in entries {
         let text = std::fs::read_to_string(&f).unwrap();
@@ -65,7 +71,13 @@ fn broken_files_get_located_errors() {
         let err = Atmosphere::load(&f).expect_err(&format!("{} should fail", f.display()));
         let hit = err.errors.iter().find(|e| e.message.contains(msg));
         let e = hit.unwrap_or_else(|| panic!("{}: no error containing {msg:?}; got:\n{err}", f.display()));
-        assert_eq!(e.line, Some(line), "{}: {msg:?} reported at {:?}, expected line {line}\n{err}", f.display(), e.line);
+        assert_eq!(
+            e.line,
+            Some(line),
+            "{}: {msg:?} reported at {:?}, expected line {line}\n{err}",
+            f.display(),
+            e.line
+        );
         assert_eq!(e.path, f);
         let shown = e.to_string();
         assert!(shown.starts_with(&format!("{}:{line}: ", f.display())), "{shown}");
@@ -76,7 +88,8 @@ fn broken_files_get_located_errors() {
 
 fn mutate(text: &str, rng: &mut Rng) -> String {
     let mut b: Vec<u8> = text.as_bytes().to_vec();
-    const TOKENS: [&str; 14] = ["=", "[", "]", "{", "}", "\"", ",", "-", "1e400", "nan", "\n", "[[aerosol]]\n", "0", "name = \"x\"\n"];
+    const TOKENS: [&str; 14] =
+        ["=", "[", "]", "{", "}", "\"", ",", "-", "1e400", "nan", "\n", "[[aerosol]]\n", "0", "name = \"x\"\n"];
     for _ in 0..1 + rng.below(3) {
         let at = rng.below(b.len());
         match rng.below(5) {

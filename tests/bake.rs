@@ -28,7 +28,18 @@ fn summary(o: &Output) -> serde_json::Value {
 }
 
 fn rendered(s: &serde_json::Value) -> Vec<(String, u64, u64)> {
-    s["skies"].as_array().unwrap().iter().map(|k| (k["name"].as_str().unwrap().to_string(), k["slices_rendered"].as_u64().unwrap(), k["slices_cached"].as_u64().unwrap())).collect()
+    s["skies"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|k| {
+            (
+                k["name"].as_str().unwrap().to_string(),
+                k["slices_rendered"].as_u64().unwrap(),
+                k["slices_cached"].as_u64().unwrap(),
+            )
+        })
+        .collect()
 }
 
 /// The tiny bake and the atmospheres it reads, copied into `dir` with the
@@ -74,33 +85,85 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
         assert_eq!(e.texels_clamped, 0, "{}", e.name);
     }
     // A sun above the horizon lights the sky; the decoder reads it.
-    let d = sky::render::camera::direction_deg(50.0, 120.0);
+    let d = sky::directions::camera::direction_deg(50.0, 120.0);
     let y = luts.sample_xyz(30.0, 0.0, 0.5, 0.0, d)[1];
     assert!(y > 0.0 && y.is_finite(), "{y}");
-    let before: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let before: Vec<Vec<u8>> =
+        ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"]
+            .iter()
+            .map(|f| std::fs::read(out.join(f)).unwrap())
+            .collect();
 
     // Nothing changed: nothing is rendered, and the files are the same bytes.
     let second = summary(&sky(&args, tmp.path()));
     assert_eq!(rendered(&second), [("clear".to_string(), 0, 64), ("hazed".to_string(), 0, 64)]);
-    let after: Vec<Vec<u8>> = ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"].iter().map(|f| std::fs::read(out.join(f)).unwrap()).collect();
+    let after: Vec<Vec<u8>> =
+        ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"]
+            .iter()
+            .map(|f| std::fs::read(out.join(f)).unwrap())
+            .collect();
     assert!(before == after, "a re-run from the cache changed the files");
 
     // The decoder on the command line.
     let m = out.join("manifest.json");
     let exr = tmp.path().join("sky.exr");
     let png = tmp.path().join("sky.png");
-    let o = sky(&["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "20", "--size", "32x32", "--out", exr.to_str().unwrap(), "--png", png.to_str().unwrap()], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "decode",
+            m.to_str().unwrap(),
+            "--sun-elevation-deg",
+            "20",
+            "--size",
+            "32x32",
+            "--out",
+            exr.to_str().unwrap(),
+            "--png",
+            png.to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(exr.exists() && png.exists());
     for camera in ["equirect", "pinhole"] {
         let out = tmp.path().join(format!("{camera}.exr"));
         let o = sky(
-            &["lut", "decode", m.to_str().unwrap(), "--sun-elevation-deg", "5", "--haziness", "0.7", "--camera", camera, "--size", "24x12", "--sun-disk", "--out", out.to_str().unwrap()],
+            &[
+                "lut",
+                "decode",
+                m.to_str().unwrap(),
+                "--sun-elevation-deg",
+                "5",
+                "--haziness",
+                "0.7",
+                "--camera",
+                camera,
+                "--size",
+                "24x12",
+                "--sun-disk",
+                "--out",
+                out.to_str().unwrap(),
+            ],
             tmp.path(),
         );
         assert!(o.status.success() && out.exists(), "{camera}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    let o = sky(&["lut", "sample", m.to_str().unwrap(), "--sun-elevation-deg", "30", "--haziness", "0.5", "--direction", "50,120", "--json"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "sample",
+            m.to_str().unwrap(),
+            "--sun-elevation-deg",
+            "30",
+            "--haziness",
+            "0.5",
+            "--direction",
+            "50,120",
+            "--json",
+        ],
+        tmp.path(),
+    );
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!((v["xyz"][1].as_f64().unwrap() / y - 1.0).abs() < 1e-12);
 }
@@ -117,7 +180,7 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
 /// --depth-m` prints it.
 #[test]
 fn a_bake_carries_the_fog_luts() {
-    use sky::lut::fog::{attenuation_texel, fog_texel_view, AttenuationTable, ATTENUATION_SIZE};
+    use sky::lut::fog::{attenuation_texel, fog_texel_view, ATTENUATION_SIZE};
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake_path = root().join("tests/bakes/tiny.toml");
@@ -139,16 +202,27 @@ fn a_bake_carries_the_fog_luts() {
     let cancel = std::sync::atomic::AtomicBool::new(false);
     for index in [5, 30, 46] {
         for shadowed in [false, true] {
-            let view = sky::bake::fog::fog_view(basis, &bake.fog, &basis.draft, index, atm.planet.radius_km, atm.planet.top_km, shadowed);
+            let view = sky::bake::fog::fog_view(
+                basis,
+                &bake.fog,
+                &basis.draft,
+                index,
+                atm.planet.radius_km,
+                atm.planet.top_km,
+                shadowed,
+            );
             let image = sky::render::render(&scene, &view, &cancel, &|| {}).unwrap();
             let elevation_sun = 90.0 - view.sun_zenith_deg;
             // Not the top row: at the zenith every u is the same direction, each
             // texel with its own noise, and the azimuth a decoder finds is arbitrary.
             for (i, j) in [(0, 0), (3, 2), (7, 5), (5, 6)] {
                 let (elevation, azimuth) = fog_texel_view(i, j, 8, 8);
-                let d = sky::render::camera::direction_deg(90.0 - elevation, azimuth);
-                let want = sky::lut::decode::mat_mul(&m, image.pixels[j * 8 + i].xyz).map(|x| x.max(0.0));
-                let got = luts.fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, if shadowed { 1.0 } else { 0.0 }).unwrap().inscatter_rgb;
+                let d = sky::directions::camera::direction_deg(90.0 - elevation, azimuth);
+                let want = sky::colour::apply(&m, image.pixels[j * 8 + i].xyz).map(|x| x.max(0.0));
+                let got = luts
+                    .fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, if shadowed { 1.0 } else { 0.0 })
+                    .unwrap()
+                    .inscatter_rgb;
                 for c in 0..3 {
                     assert!((got[c] - want[c]).abs() <= 1e-3 * want[c] + 1e-6 * want[1], "slice {index}, shadowed {shadowed}, texel ({i}, {j}), channel {c}: decoded {got:?}, rendered {want:?}");
                 }
@@ -156,24 +230,60 @@ fn a_bake_carries_the_fog_luts() {
         }
     }
     let geometry = sky::lut::decode_fog::geometry_of(fs, f.ceiling_km);
-    let table = AttenuationTable::compute(&scene, geometry).channel_texels(&m);
+    let table = sky::bake::tables::attenuation_table(&scene, geometry).channel_texels(&m);
     for (i, j) in [(0, 0), (10, 3), (40, 20), (63, 63)] {
         let (depth, elevation) = attenuation_texel(&geometry, i, j);
-        let d = sky::render::camera::direction_deg(90.0 - elevation, 30.0);
+        let d = sky::directions::camera::direction_deg(90.0 - elevation, 30.0);
         let got = luts.fog(20.0, 0.0, 0.0, 0.0, d, depth, 0.0).unwrap().attenuation_rgb;
         let want = table[j * ATTENUATION_SIZE + i];
         for c in 0..3 {
-            assert!((got[c] - want[c]).abs() <= 1e-3 * want[c] + 1e-6, "attenuation texel ({i}, {j}): decoded {got:?}, computed {want:?}");
+            assert!(
+                (got[c] - want[c]).abs() <= 1e-3 * want[c] + 1e-6,
+                "attenuation texel ({i}, {j}): decoded {got:?}, computed {want:?}"
+            );
         }
     }
-    let d = sky::render::camera::direction_deg(85.0, 90.0);
-    let (near, far) = (luts.fog(20.0, 0.0, 0.0, 0.0, d, 1.0, 0.0).unwrap(), luts.fog(20.0, 0.0, 0.0, 0.0, d, 10.0, 0.0).unwrap());
-    assert!(near.inscatter_rgb[1] < far.inscatter_rgb[1] && near.attenuation_rgb[1] > far.attenuation_rgb[1], "{near:?} {far:?}");
+    let d = sky::directions::camera::direction_deg(85.0, 90.0);
+    let (near, far) =
+        (luts.fog(20.0, 0.0, 0.0, 0.0, d, 1.0, 0.0).unwrap(), luts.fog(20.0, 0.0, 0.0, 0.0, d, 10.0, 0.0).unwrap());
+    assert!(
+        near.inscatter_rgb[1] < far.inscatter_rgb[1] && near.attenuation_rgb[1] > far.attenuation_rgb[1],
+        "{near:?} {far:?}"
+    );
     let m_path = out.join("manifest.json");
-    let o = sky(&["lut", "sample", m_path.to_str().unwrap(), "--sun-elevation-deg", "20", "--direction", "85,90", "--depth-m", "10000", "--json"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "sample",
+            m_path.to_str().unwrap(),
+            "--sun-elevation-deg",
+            "20",
+            "--direction",
+            "85,90",
+            "--depth-m",
+            "10000",
+            "--json",
+        ],
+        tmp.path(),
+    );
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!((v["fog"]["inscatter_rgb"][1].as_f64().unwrap() / far.inscatter_rgb[1] - 1.0).abs() < 1e-12, "{v}");
-    let o = sky(&["lut", "sample", m_path.to_str().unwrap(), "--sun-elevation-deg", "20", "--direction", "85,90", "--depth-m", "100", "--cloud-occlusion", "2"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "sample",
+            m_path.to_str().unwrap(),
+            "--sun-elevation-deg",
+            "20",
+            "--direction",
+            "85,90",
+            "--depth-m",
+            "100",
+            "--cloud-occlusion",
+            "2",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
@@ -187,14 +297,20 @@ fn a_draft_forecasts_its_cost_from_probes() {
     let bake = root().join("tests/bakes/tiny.toml");
     let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json-progress"], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
-    let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
+    let events: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    let forecast =
+        events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
     assert_eq!(forecast["from"], "probes");
     // 126 distinct sky slices of 4 x 16 texels and as many fog slices of
     // 8 x 8 (the Shadowed Fog's renders), all at 2 samples.
     assert_eq!(forecast["samples"], 126 * 64 * 2 + 126 * 64 * 2);
     let planned = events.iter().find(|e| e["event"] == "planned").unwrap();
-    assert_eq!((planned["slices_total"].as_u64(), planned["fog_slices"].as_u64()), (Some(2 * 64 + 2 * 64), Some(126)), "{planned}");
+    assert_eq!(
+        (planned["slices_total"].as_u64(), planned["fog_slices"].as_u64()),
+        (Some(2 * 64 + 2 * 64), Some(126)),
+        "{planned}"
+    );
     // The fog slices move the bake's progress: its last event has every texel done.
     let last = events.iter().rev().find(|e| e["event"] == "progress").unwrap();
     assert_eq!(last["texels_done"], last["texels_total"], "{last}");
@@ -205,7 +321,10 @@ fn a_draft_forecasts_its_cost_from_probes() {
     // It comes before the first slice, and the progress after it has an ETA.
     let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
     assert!(at("forecast") < at("slice"));
-    assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
+    assert!(
+        events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()),
+        "{events:?}"
+    );
     // Planning reports each probe: the sky's and the fog's at 5 slices, of
     // both skies, all before the forecast.
     assert_planning_counts(&events, "probes", 2 * 2 * 5);
@@ -218,7 +337,11 @@ fn assert_planning_counts(events: &[serde_json::Value], from: &str, total: u64) 
     let planning: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "planning").collect();
     assert_eq!(planning.len() as u64, total, "the first: {:?}", planning.first());
     for (i, e) in planning.iter().enumerate() {
-        assert_eq!((e["from"].as_str(), e["done"].as_u64(), e["total"].as_u64()), (Some(from), Some(i as u64 + 1), Some(total)), "{e}");
+        assert_eq!(
+            (e["from"].as_str(), e["done"].as_u64(), e["total"].as_u64()),
+            (Some(from), Some(i as u64 + 1), Some(total)),
+            "{e}"
+        );
         assert!(e["eta_s"].as_f64().is_some_and(|s| s >= 0.0), "{e}");
     }
     assert_eq!(planning.last().unwrap()["eta_s"].as_f64(), Some(0.0));
@@ -239,19 +362,31 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
     let text =
         format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
     std::fs::write(&bake, text).unwrap();
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"], tmp.path());
+    let o = sky(
+        &["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"],
+        tmp.path(),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+    let events: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
     let planned = events.iter().find(|e| e["event"] == "planned").unwrap();
     // 64 sky slices and 64 fog slices, of which 63 distinct fog views.
     assert_eq!((planned["slices_total"].as_u64(), planned["fog_slices"].as_u64()), (Some(128), Some(63)), "{planned}");
-    let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
+    let forecast =
+        events.iter().find(|e| e["event"] == "forecast").unwrap_or_else(|| panic!("no forecast in {events:?}"));
     assert_eq!(forecast["from"], "pilots");
     let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
     assert!(at("forecast") < at("slice"));
-    assert!(events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()), "{events:?}");
+    assert!(
+        events.iter().skip(at("forecast")).filter(|e| e["event"] == "progress").all(|e| e["eta_s"].is_f64()),
+        "{events:?}"
+    );
     let last = events.iter().rev().find(|e| e["event"] == "progress").unwrap();
-    assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(64 * 64 + 63 * 64), Some(64 * 64 + 63 * 64)), "{last}");
+    assert_eq!(
+        (last["texels_done"].as_u64(), last["texels_total"].as_u64()),
+        (Some(64 * 64 + 63 * 64), Some(64 * 64 + 63 * 64)),
+        "{last}"
+    );
     // A pilot for every distinct slice, sky and fog (63 of each: two
     // slices share a sun), each reported.
     assert_planning_counts(&events, "pilots", 63 + 63);
@@ -266,15 +401,33 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
                 std::fs::remove_file(f.path()).unwrap();
             }
         }
-        let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress", "--threads", threads], tmp.path());
+        let o = sky(
+            &[
+                "bake-luts",
+                bake.to_str().unwrap(),
+                "--out",
+                out.to_str().unwrap(),
+                "--quality",
+                "final",
+                "--json-progress",
+                "--threads",
+                threads,
+            ],
+            tmp.path(),
+        );
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let events: Vec<serde_json::Value> = String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
+        let events: Vec<serde_json::Value> =
+            String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
         assert_planning_counts(&events, "pilots", 63 + 63);
         events.into_iter().find(|e| e["event"] == "forecast").unwrap()
     };
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let same = again(&threads.to_string());
-    assert_eq!((&same["saved"], &same["core_seconds"], &same["samples"]), (&serde_json::json!(126), &forecast["core_seconds"], &forecast["samples"]), "{same}");
+    assert_eq!(
+        (&same["saved"], &same["core_seconds"], &same["samples"]),
+        (&serde_json::json!(126), &forecast["core_seconds"], &forecast["samples"]),
+        "{same}"
+    );
     let other = again(&(threads + 1).to_string());
     assert_eq!(other["saved"], 0, "{other}");
 }
@@ -298,16 +451,39 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
     };
     let (plain, grid) = (write("plain.toml", ""), write("grid.toml", "ms_grid = \"6x5\""));
     let cache = tmp.path().join("cache");
-    let bake = |file: &Path, out: &str| bake_events(&["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--quality", "final", "--json-progress"], tmp.path());
-    let find = |events: &[serde_json::Value], name: &str| events.iter().rev().find(|e| e["event"] == name).cloned().unwrap_or_else(|| panic!("no {name} in {events:?}"));
+    let bake = |file: &Path, out: &str| {
+        bake_events(
+            &[
+                "bake-luts",
+                file.to_str().unwrap(),
+                "--out",
+                out,
+                "--cache",
+                cache.to_str().unwrap(),
+                "--quality",
+                "final",
+                "--json-progress",
+            ],
+            tmp.path(),
+        )
+    };
+    let find = |events: &[serde_json::Value], name: &str| {
+        events.iter().rev().find(|e| e["event"] == name).cloned().unwrap_or_else(|| panic!("no {name} in {events:?}"))
+    };
     // Progress never goes back, also after the queue (the plain bake's fog
     // slices and the grid's resampling come after it), and every slice
     // rendered now carries its forecast.
     let check_progress = |events: &[serde_json::Value]| {
-        let done: Vec<u64> = events.iter().filter(|e| e["event"] == "progress").filter_map(|e| e["texels_done"].as_u64()).collect();
+        let done: Vec<u64> =
+            events.iter().filter(|e| e["event"] == "progress").filter_map(|e| e["texels_done"].as_u64()).collect();
         assert!(done.windows(2).all(|w| w[0] <= w[1]), "progress went back: {done:?}");
-        let rendered: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "slice" && e["cached"] == false).collect();
-        assert!(!rendered.is_empty() && rendered.iter().all(|e| e["forecast_core_seconds"].as_f64().is_some_and(|f| f > 0.0)), "{rendered:?}");
+        let rendered: Vec<&serde_json::Value> =
+            events.iter().filter(|e| e["event"] == "slice" && e["cached"] == false).collect();
+        assert!(
+            !rendered.is_empty()
+                && rendered.iter().all(|e| e["forecast_core_seconds"].as_f64().is_some_and(|f| f > 0.0)),
+            "{rendered:?}"
+        );
     };
     check_progress(&bake(&plain, "plain"));
     let events = bake(&grid, "grid");
@@ -324,7 +500,10 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
     assert_eq!((last["texels_done"].as_u64(), last["texels_total"].as_u64()), (Some(nodes), Some(nodes)), "{last}");
     let again = bake(&grid, "grid2");
     assert_eq!(find(&again, "planned")["slices_cached"].as_u64(), Some(128), "every sky and fog slice");
-    assert_eq!(std::fs::read(tmp.path().join("grid/clear.ktx2")).unwrap(), std::fs::read(tmp.path().join("grid2/clear.ktx2")).unwrap());
+    assert_eq!(
+        std::fs::read(tmp.path().join("grid/clear.ktx2")).unwrap(),
+        std::fs::read(tmp.path().join("grid2/clear.ktx2")).unwrap()
+    );
     // The two skies as stored: each texel's luminance-weighted green over
     // the plain bake's, at 5 % noise each (the median of some 4000 texels
     // whose noise is shared in part, through the slices' common seed and the
@@ -367,7 +546,10 @@ fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
     let (whole, small) = (write("whole.toml", ""), write("small.toml", "fog_ms_size = \"5x8\""));
     let cache = tmp.path().join("cache");
     let bake = |file: &Path, out: &str| {
-        let events = bake_events(&["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"], tmp.path());
+        let events = bake_events(
+            &["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"],
+            tmp.path(),
+        );
         events.into_iter().find(|e| e["event"] == "planned").expect("a planned event")
     };
     let planned = bake(&whole, "whole");
@@ -377,7 +559,11 @@ fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
     // third of its rows, the Shadowed Fog's steep rise toward the horizon came
     // out 24 % bright: the size must be measured).
     let planned = bake(&small, "small");
-    assert_eq!((planned["fog_slices"].as_u64(), planned["texels_to_render"].as_u64()), (Some(fog_slices), Some(fog_slices * 40)), "{planned}");
+    assert_eq!(
+        (planned["fog_slices"].as_u64(), planned["texels_to_render"].as_u64()),
+        (Some(fog_slices), Some(fog_slices * 40)),
+        "{planned}"
+    );
     let load = |dir: &str| sky::lut::decode::Luts::load(&tmp.path().join(dir).join("manifest.json")).unwrap();
     let (a, b) = (load("small"), load("whole"));
     let f = a.manifest.fog.as_ref().expect("a fog entry");
@@ -385,9 +571,13 @@ fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
     for occlusion in [0.0, 1.0] {
         let mut ratios = Vec::new();
         for elevation_sun in [40.0, 20.0, 5.0, 1.0] {
-            for (zenith, azimuth) in [(10.0, 0.0), (45.0, 60.0), (70.0, 120.0), (85.0, 20.0), (88.0, 170.0), (89.5, 90.0)] {
-                let d = sky::render::camera::direction_deg(zenith, azimuth);
-                let get = |l: &sky::lut::decode::Luts| l.fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, occlusion).unwrap().inscatter_rgb[1];
+            for (zenith, azimuth) in
+                [(10.0, 0.0), (45.0, 60.0), (70.0, 120.0), (85.0, 20.0), (88.0, 170.0), (89.5, 90.0)]
+            {
+                let d = sky::directions::camera::direction_deg(zenith, azimuth);
+                let get = |l: &sky::lut::decode::Luts| {
+                    l.fog(elevation_sun, 0.0, 0.0, 0.0, d, 1e6, occlusion).unwrap().inscatter_rgb[1]
+                };
                 ratios.push(get(&a) / get(&b) - 1.0);
             }
         }
@@ -421,14 +611,34 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     cache.put(&key, &slice).unwrap();
     let second = tmp.path().join("second");
     let cache_dir = first.join("cache");
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", second.to_str().unwrap(), "--cache", cache_dir.to_str().unwrap(), "--json"], tmp.path());
+    let o = sky(
+        &[
+            "bake-luts",
+            bake.to_str().unwrap(),
+            "--out",
+            second.to_str().unwrap(),
+            "--cache",
+            cache_dir.to_str().unwrap(),
+            "--json",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     let line = err.lines().find(|l| l.contains("is not finite")).unwrap_or_else(|| panic!("{err}"));
-    assert!(line.starts_with("sky bake-luts: basis sky ") && line.contains(", slice ") && line.ends_with("texel (u 1, v 2): RGB is not finite"), "{line}");
+    assert!(
+        line.starts_with("sky bake-luts: basis sky ")
+            && line.contains(", slice ")
+            && line.ends_with("texel (u 1, v 2): RGB is not finite"),
+        "{line}"
+    );
     let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(v["errors"][0].as_str().unwrap(), line.trim_start_matches("sky bake-luts: "));
-    assert!(!second.join("manifest.json").exists() && !second.join("clear.ktx2").exists() && !second.join("hazed.ktx2").exists());
+    assert!(
+        !second.join("manifest.json").exists()
+            && !second.join("clear.ktx2").exists()
+            && !second.join("hazed.ktx2").exists()
+    );
 }
 
 /// A bake carries the sun that its sky textures leave out: a transmittance
@@ -457,18 +667,27 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
 
     // The decoded sun against the table computed here from the same optics.
     let atm = sky::atmosphere::Atmosphere::load(&atm_path).unwrap();
-    let spectral = sky::bake::run::spectral_settings(&sky::bake::Sampling { band_nm: 20.0, spp: 1, max_rel_error: None, ms_grid: None, fog_ms_size: None });
+    let spectral = sky::bake::run::spectral_settings(&sky::bake::Sampling {
+        band_nm: 20.0,
+        spp: 1,
+        max_rel_error: None,
+        ms_grid: None,
+        fog_ms_size: None,
+    });
     let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
-    let table = sky::lut::transmittance::TransmittanceTable::compute(&scene);
-    let m = sky::lut::colour::ColourSpace::Rec709.xyz_to_rgb();
-    let to_rgb = |x: [f64; 3]| sky::lut::decode::mat_mul(&m, x);
+    let table = sky::bake::tables::transmittance_table(&scene);
+    let m = sky::colour::ColourSpace::Rec709.xyz_to_rgb();
+    let to_rgb = |x: [f64; 3]| sky::colour::apply(&m, x);
     for elevation in [60.0f64, 20.0, 5.0, 1.0] {
         let mu = elevation.to_radians().sin();
         // Channels outside the gamut (blue, within a degree or two of the horizon) are stored as 0.
         let want = to_rgb(table.sample_xyz(0.0, mu)).map(|x| x.max(0.0));
         let got = luts.sun(elevation, 0.0, 0.0).unwrap().irradiance_rgb;
         for c in 0..3 {
-            assert!((got[c] - want[c]).abs() <= 2e-3 * want[1], "sun at {elevation} deg, channel {c}: decoded {got:?}, computed {want:?}");
+            assert!(
+                (got[c] - want[c]).abs() <= 2e-3 * want[1],
+                "sun at {elevation} deg, channel {c}: decoded {got:?}, computed {want:?}"
+            );
         }
     }
     assert_eq!(luts.sun(-1.0, 0.0, 0.0).unwrap().irradiance_rgb, [0.0; 3]);
@@ -484,16 +703,21 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         let r = render(&scene, &s.view, &std::sync::atomic::AtomicBool::new(false), &|| {}).unwrap();
         let direct = r.pixels[0].xyz_direct.map(|x| x * sun.solid_angle_sr);
         let want = sun.irradiance_xyz[index];
-        assert!((direct[1] / want[1] - 1.0).abs() < 0.01, "slice {index} (sun zenith {zenith:.2}): rendered {direct:?}, manifest {want:?}");
+        assert!(
+            (direct[1] / want[1] - 1.0).abs() < 0.01,
+            "slice {index} (sun zenith {zenith:.2}): rendered {direct:?}, manifest {want:?}"
+        );
     }
 
     // The decoded image's sun disk carries the sun's irradiance, whether it
     // spans many pixels (a 2 degree pinhole on the sun) or falls inside one
     // (a 64 x 32 equirect, pixels of 5.6 degrees): the image with the disk
     // less the one without, times each pixel's solid angle, summed.
-    use sky::render::camera::Camera;
+    use sky::directions::camera::Camera;
     let elevation = 30.0f64;
-    let e_sun = sky::lut::decode::mat_mul(&luts.manifest.colour.xyz_from_rgb, luts.sun(elevation, 0.0, 0.0).unwrap().irradiance_rgb)[1];
+    let e_sun =
+        sky::colour::apply(&luts.manifest.colour.xyz_from_rgb, luts.sun(elevation, 0.0, 0.0).unwrap().irradiance_rgb)
+            [1];
     let pinhole = Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: elevation, fov_deg: 2.0 };
     let equirect = Camera::Equirect;
     for (camera, w, h) in [(&pinhole, 64usize, 64usize), (&equirect, 64, 32)] {
@@ -501,12 +725,19 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         let without = luts.decode_image(camera, w, h, elevation, 0.0, 0.0, 0.0, false).unwrap();
         let omega = |y: usize| match camera {
             // Equirect: (2π / w)(cos θ₀ − cos θ₁) exactly.
-            Camera::Equirect => 2.0 * std::f64::consts::PI / w as f64 * ((std::f64::consts::PI * y as f64 / h as f64).cos() - (std::f64::consts::PI * (y + 1) as f64 / h as f64).cos()),
+            Camera::Equirect => {
+                2.0 * std::f64::consts::PI / w as f64
+                    * ((std::f64::consts::PI * y as f64 / h as f64).cos()
+                        - (std::f64::consts::PI * (y + 1) as f64 / h as f64).cos())
+            }
             // A 2 degree pinhole: (fov / w)² to 1e-4.
             _ => (2f64.to_radians() / w as f64).powi(2),
         };
         let flux: f64 = (0..w * h).map(|i| (with[i][1] - without[i][1]) * omega(i / w)).sum();
-        assert!((flux / e_sun - 1.0).abs() < 0.05, "{camera:?}: the disk carries {flux:.1} against the sun's {e_sun:.1}");
+        assert!(
+            (flux / e_sun - 1.0).abs() < 0.05,
+            "{camera:?}: the disk carries {flux:.1} against the sun's {e_sun:.1}"
+        );
     }
 
     // Ambient light: the manifest's upward irradiance of a slice against a
@@ -530,11 +761,19 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
             }
         }
         let sh = a.sh_irradiance(glam::DVec3::Z);
-        assert!((a.irradiance_up[1] / direct[1] - 1.0).abs() < 0.03, "slice {index}: manifest {:?}, direct {direct:?}", a.irradiance_up);
+        assert!(
+            (a.irradiance_up[1] / direct[1] - 1.0).abs() < 0.03,
+            "slice {index}: manifest {:?}, direct {direct:?}",
+            a.irradiance_up
+        );
         // Order 2 cannot resolve the aureole, a near-point source: measured
         // +8 % (green) with the sun 30-40 degrees high, +2.5 % and +0.8 % at
         // lower suns; 20 % bounds the truncation, not noise.
-        assert!((sh[1] / a.irradiance_up[1] - 1.0).abs() < 0.2, "slice {index}: harmonics {sh:?}, integrated {:?}", a.irradiance_up);
+        assert!(
+            (sh[1] / a.irradiance_up[1] - 1.0).abs() < 0.2,
+            "slice {index}: harmonics {sh:?}, integrated {:?}",
+            a.irradiance_up
+        );
         let decoded = luts.ambient(elevation, 0.0, 0.0).unwrap();
         assert!((decoded.irradiance_up[1] / a.irradiance_up[1] - 1.0).abs() < 1e-9);
     }
@@ -544,14 +783,22 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
     let file = luts.manifest.ambient_file.as_ref().expect("an ambient file");
     assert_eq!((file.vk_format, file.width, file.height, file.layers.len()), (97, 64, 11, 1));
     let scale = (-file.scale_log2[0] as f64).exp2();
-    let max = ambient.iter().flat_map(|a| a.sh9.iter().flatten().chain(a.irradiance_up.iter()).chain(a.mean_radiance.iter())).fold(0.0f64, |m, v| m.max(v.abs()));
+    let max = ambient
+        .iter()
+        .flat_map(|a| a.sh9.iter().flatten().chain(a.irradiance_up.iter()).chain(a.mean_radiance.iter()))
+        .fold(0.0f64, |m, v| m.max(v.abs()));
     let mut negative = 0;
     for (i, a) in ambient.iter().enumerate() {
         for (row, want) in [a.irradiance_up, a.mean_radiance].into_iter().chain(a.sh9).enumerate() {
             let got = luts.ambient_texture[0][row * 64 + i];
             for c in 0..3 {
                 negative += (want[c] < 0.0) as usize;
-                assert!((got[c] as f64 * scale - want[c]).abs() <= max * 2f64.powi(-11), "slice {i}, row {row}, channel {c}: {} against {}", got[c] as f64 * scale, want[c]);
+                assert!(
+                    (got[c] as f64 * scale - want[c]).abs() <= max * 2f64.powi(-11),
+                    "slice {i}, row {row}, channel {c}: {} against {}",
+                    got[c] as f64 * scale,
+                    want[c]
+                );
             }
         }
     }
@@ -588,7 +835,9 @@ fn spawn_bake(bake: &Path, out: &Path, stderr: Stdio) -> std::process::Child {
 
 /// The files in `d` ending in `.ext`.
 fn files(d: &Path, ext: &str) -> Vec<PathBuf> {
-    std::fs::read_dir(d).map(|r| r.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == ext)).collect()).unwrap_or_default()
+    std::fs::read_dir(d)
+        .map(|r| r.map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|x| x == ext)).collect())
+        .unwrap_or_default()
 }
 
 /// Waits (30 s at most) until a journal in the cache folder `cache` holds
@@ -596,7 +845,8 @@ fn files(d: &Path, ext: &str) -> Vec<PathBuf> {
 /// column; a journal's header is about 130 bytes, a column of 16 texels
 /// several hundred more.
 fn wait_for_a_journaled_column(cache: &Path) {
-    let journaled = || files(cache, "journal").iter().any(|p| std::fs::metadata(p).map(|m| m.len() > 400).unwrap_or(false));
+    let journaled =
+        || files(cache, "journal").iter().any(|p| std::fs::metadata(p).map(|m| m.len() > 400).unwrap_or(false));
     let mut waited = 0;
     while !journaled() && waited < 6000 {
         std::thread::sleep(std::time::Duration::from_millis(5));
@@ -618,19 +868,24 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     let done = files(&cache, "slice").len();
     assert!(done == 0 || done == 63, "{done} slices cached when the bake was killed: a sky's are cached together");
     assert!(!out.join("manifest.json").exists());
-    let resumed = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let resumed =
+        summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let total: u64 = rendered(&resumed).iter().map(|r| r.1).sum();
     // 126 distinct views: slices 47 and 48 of each sky share one.
     assert_eq!(total, 126 - done as u64, "{resumed}");
     // The killed strip's journaled columns were not rendered again, and its journal is gone.
-    let columns_resumed: u64 = resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
+    let columns_resumed: u64 =
+        resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
     assert!(columns_resumed > 0, "{resumed}");
     assert!(files(&cache, "journal").is_empty());
     // The same bytes as a bake that was never interrupted.
     let fresh = tmp.path().join("fresh");
     summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"], tmp.path()));
     for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2"] {
-        assert!(std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(), "{f} differs after a resumed bake");
+        assert!(
+            std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(),
+            "{f} differs after a resumed bake"
+        );
     }
 }
 
@@ -650,8 +905,10 @@ fn ctrl_c_stops_a_bake_that_then_resumes() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(err.contains("cancelled; nothing was packed") && err.contains("the same command resumes"), "{err}");
     assert!(!out.join("manifest.json").exists());
-    let resumed = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
-    let columns_resumed: u64 = resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
+    let resumed =
+        summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let columns_resumed: u64 =
+        resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
     assert!(columns_resumed > 0, "{resumed}");
     assert!(out.join("manifest.json").exists());
 }
@@ -661,17 +918,40 @@ fn a_slice_goes_only_into_the_cache() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("luts");
-    let s = summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:5,hazed:63,clear:fog:5", "--json"], tmp.path()));
+    let s = summary(&sky(
+        &[
+            "bake-luts",
+            bake.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--slice",
+            "clear:5,hazed:63,clear:fog:5",
+            "--json",
+        ],
+        tmp.path(),
+    ));
     // The fog slice counts, with its cost, in the summary.
     assert_eq!(s["rendered"], 3, "{s}");
-    let fog = s["slices"].as_array().unwrap().iter().find(|e| e["slice"] == "clear:fog:5").cloned().unwrap_or_else(|| panic!("no fog slice in {s}"));
+    let fog = s["slices"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["slice"] == "clear:fog:5")
+        .cloned()
+        .unwrap_or_else(|| panic!("no fog slice in {s}"));
     assert!(fog["core_seconds"].as_f64().unwrap() > 0.0 && fog["texels"] == 64, "{fog}");
     assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 3);
     assert!(!out.join("manifest.json").exists());
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
+    let o =
+        sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
     assert_eq!(o.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--slice cloudy3:1: no such basis sky or slice"), "{}", String::from_utf8_lossy(&o.stderr));
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:64"], tmp.path());
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--slice cloudy3:1: no such basis sky or slice"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let o =
+        sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:64"], tmp.path());
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
@@ -679,14 +959,39 @@ fn a_slice_goes_only_into_the_cache() {
 fn bad_bake_files_are_located_errors() {
     let tmp = tempfile::tempdir().unwrap();
     let bad = tmp.path().join("bad.toml");
-    std::fs::write(&bad, "[[sky]]\nname = \"clear\"\natmosphere = \"missing.toml\"\nwidth = 32\nheight = 128\n").unwrap();
+    std::fs::write(&bad, "[[sky]]\nname = \"clear\"\natmosphere = \"missing.toml\"\nwidth = 32\nheight = 128\n")
+        .unwrap();
     let o = sky(&["bake-luts", bad.to_str().unwrap(), "--out", tmp.path().join("o").to_str().unwrap()], tmp.path());
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml:3: sky \"clear\": atmosphere file") && err.contains("not found"), "{err}");
-    let o = sky(&["lut", "sample", tmp.path().join("none.json").to_str().unwrap(), "--sun-elevation-deg", "10", "--direction", "10,10"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "sample",
+            tmp.path().join("none.json").to_str().unwrap(),
+            "--sun-elevation-deg",
+            "10",
+            "--direction",
+            "10,10",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(1));
-    let o = sky(&["lut", "sample", tmp.path().join("none.json").to_str().unwrap(), "--sun-elevation-deg", "10", "--haziness", "2", "--direction", "10,10"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "sample",
+            tmp.path().join("none.json").to_str().unwrap(),
+            "--sun-elevation-deg",
+            "10",
+            "--haziness",
+            "2",
+            "--direction",
+            "10,10",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(2));
 }
 
@@ -698,8 +1003,25 @@ fn lut_verify_reports_every_elevation() {
     summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let m = out.join("manifest.json");
     let plots = tmp.path().join("plots");
-    let o =
-        sky(&["lut", "verify", m.to_str().unwrap(), "--bake", bake.to_str().unwrap(), "--directions", "40", "--spp", "4", "--fog-spp", "16", "--plot", plots.to_str().unwrap(), "--json"], tmp.path());
+    let o = sky(
+        &[
+            "lut",
+            "verify",
+            m.to_str().unwrap(),
+            "--bake",
+            bake.to_str().unwrap(),
+            "--directions",
+            "40",
+            "--spp",
+            "4",
+            "--fog-spp",
+            "16",
+            "--plot",
+            plots.to_str().unwrap(),
+            "--json",
+        ],
+        tmp.path(),
+    );
     let v = summary(&o);
     let skies = v["skies"].as_array().unwrap();
     assert_eq!(skies.len(), 2);
@@ -707,7 +1029,8 @@ fn lut_verify_reports_every_elevation() {
         let e = s["elevations"].as_array().unwrap();
         assert_eq!(e.len(), 13, "{s}");
         // Above the horizon the references are lit and every figure is a number.
-        let day: Vec<&serde_json::Value> = e.iter().filter(|x| x["sun_elevation_deg"].as_f64().unwrap() > 1.0).collect();
+        let day: Vec<&serde_json::Value> =
+            e.iter().filter(|x| x["sun_elevation_deg"].as_f64().unwrap() > 1.0).collect();
         assert!(!day.is_empty());
         for x in day {
             for k in ["median_rel_y", "p99_rel_y", "median_de2000", "psnr_db"] {
@@ -732,7 +1055,10 @@ fn lut_verify_reports_every_elevation() {
         // and the attenuation to the quadrature's within its texels'
         // interpolation (exact transmittances: no noise).
         let fog = &s["fog"];
-        assert!(fog["fog"]["count"].as_u64().unwrap() > 150 && fog["shadowed"]["count"].as_u64().unwrap() > 150, "{fog}");
+        assert!(
+            fog["fog"]["count"].as_u64().unwrap() > 150 && fog["shadowed"]["count"].as_u64().unwrap() > 150,
+            "{fog}"
+        );
         assert!(fog["fog"]["median"].as_f64().is_some_and(f64::is_finite), "{fog}");
         assert!(fog["attenuation"]["median"].as_f64().unwrap() < 0.01, "{fog}");
     }
@@ -743,7 +1069,10 @@ fn lut_verify_reports_every_elevation() {
 fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
     let tmp = tempfile::tempdir().unwrap();
     let atm = root().join("tests/atmospheres/disort_rayleigh_hg.toml");
-    let o = sky(&["lut", "interpolation", atm.to_str().unwrap(), "--size", "8x32", "--directions", "60", "--json"], tmp.path());
+    let o = sky(
+        &["lut", "interpolation", atm.to_str().unwrap(), "--size", "8x32", "--directions", "60", "--json"],
+        tmp.path(),
+    );
     let r = summary(&o);
     let regions = r["regions"].as_array().unwrap();
     // Every slice from 60° sun zenith to the horizon (slices 5 to 47 of the time mapping).
@@ -777,8 +1106,25 @@ fn lut_interpolation_measures_both_mappings_and_refuses_bad_flags() {
 fn bench_bake_measures_coarse_multiple_scattering() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
-    let args =
-        ["bench", "bake", bake.to_str().unwrap(), "--skies", "clear", "--sun-zenith-deg", "60", "--stride", "2", "--spp", "8", "--reference-spp", "64", "--methods", "quadrature", "--threads", "1"];
+    let args = [
+        "bench",
+        "bake",
+        bake.to_str().unwrap(),
+        "--skies",
+        "clear",
+        "--sun-zenith-deg",
+        "60",
+        "--stride",
+        "2",
+        "--spp",
+        "8",
+        "--reference-spp",
+        "64",
+        "--methods",
+        "quadrature",
+        "--threads",
+        "1",
+    ];
     let r = summary(&sky(&[&args[..], &["--coarse-ms", "--coarse-ms-grid", "4x5", "--json"]].concat(), tmp.path()));
     let slice = &r["slices"][0];
     let grids = slice["coarse_ms"].as_array().unwrap();
@@ -803,7 +1149,8 @@ fn bench_bake_measures_coarse_multiple_scattering() {
     // below and the sun patch's 8 x 7, of 64 texels.
     assert_eq!(grids[0]["sampled_fraction"].as_f64(), Some(0.25));
     assert_eq!(grids[1]["sampled_fraction"].as_f64(), Some(86.0 / 64.0));
-    let totals: Vec<&serde_json::Value> = r["coarse_ms"].as_array().unwrap().iter().filter(|c| c["sky"] == "total").collect();
+    let totals: Vec<&serde_json::Value> =
+        r["coarse_ms"].as_array().unwrap().iter().filter(|c| c["sky"] == "total").collect();
     assert_eq!(totals.len(), 2, "{r}");
     // Not above the plain total: equal where the timed sampling is lost in
     // the per-texel overhead (the 8-sample render timed no slower than the
@@ -818,5 +1165,9 @@ fn bench_bake_measures_coarse_multiple_scattering() {
     let mut stride_zero = args.to_vec();
     stride_zero[args.iter().position(|&a| a == "--stride").unwrap() + 1] = "2x0";
     assert_eq!(sky(&stride_zero, tmp.path()).status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&o.stderr).contains("--stride must exceed 1"), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        String::from_utf8_lossy(&o.stderr).contains("--stride must exceed 1"),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
 }

@@ -34,7 +34,10 @@ fn help_lists_every_command() {
 fn preview_refuses_what_is_not_a_bake() {
     let c = tempfile::tempdir().unwrap();
     let out = c.path().join("preview");
-    let o = sky(&["preview", "atmospheres/clear.toml", "--sun-elevation-deg", "10", "--out", out.to_str().unwrap()], c.path());
+    let o = sky(
+        &["preview", "atmospheres/clear.toml", "--sun-elevation-deg", "10", "--out", out.to_str().unwrap()],
+        c.path(),
+    );
     if cfg!(feature = "preview") {
         assert_eq!(o.status.code(), Some(1), "{}", text(&o).1);
         assert!(text(&o).1.contains("clear.toml"), "{}", text(&o).1);
@@ -44,7 +47,21 @@ fn preview_refuses_what_is_not_a_bake() {
     }
     assert!(!out.exists());
     // A bad flag value is a usage error naming the flag (exit 2).
-    let o = sky(&["preview", "atmospheres/clear.toml", "--sun-elevation-deg", "10", "--camera", "pinhole", "--fov-deg", "200", "--out", out.to_str().unwrap()], c.path());
+    let o = sky(
+        &[
+            "preview",
+            "atmospheres/clear.toml",
+            "--sun-elevation-deg",
+            "10",
+            "--camera",
+            "pinhole",
+            "--fov-deg",
+            "200",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        c.path(),
+    );
     assert_eq!(o.status.code(), Some(2));
     if cfg!(feature = "preview") {
         assert!(text(&o).1.contains("--fov-deg"), "{}", text(&o).1);
@@ -57,7 +74,8 @@ fn check_reports_good_and_bad_files() {
     let c = tempfile::tempdir().unwrap();
     let o = sky(&["atmosphere", "check", "atmospheres/clear.toml", "atmospheres/hazed.toml"], c.path());
     assert_eq!(o.status.code(), Some(0), "{:?}", text(&o));
-    let o = sky(&["atmosphere", "check", "atmospheres/clear.toml", "tests/bad_atmospheres/negative_sigma.toml"], c.path());
+    let o =
+        sky(&["atmosphere", "check", "atmospheres/clear.toml", "tests/bad_atmospheres/negative_sigma.toml"], c.path());
     assert_eq!(o.status.code(), Some(1));
     let (_, err) = text(&o);
     assert!(err.contains("tests/bad_atmospheres/negative_sigma.toml:"), "{err}");
@@ -81,7 +99,16 @@ fn inspect_json_has_documented_keys() {
     let aod = s["aerosol_optical_depth"].as_f64().unwrap();
     assert!((aod - 0.05).abs() < 0.002, "clear.toml asks for AOD 0.05 at 550 nm: {aod}");
     for c in s["components"].as_array().unwrap().iter().chain([&s["total"]]) {
-        for k in ["name", "kind", "optical_depth", "scattering_optical_depth", "absorption_optical_depth", "single_scattering_albedo", "asymmetry", "extinction_ground_per_km"] {
+        for k in [
+            "name",
+            "kind",
+            "optical_depth",
+            "scattering_optical_depth",
+            "absorption_optical_depth",
+            "single_scattering_albedo",
+            "asymmetry",
+            "extinction_ground_per_km",
+        ] {
             assert!(!c[k].is_null(), "missing {k} in {c}");
         }
     }
@@ -97,7 +124,18 @@ fn inspect_json_has_documented_keys() {
 fn inspect_writes_plots() {
     let c = tempfile::tempdir().unwrap();
     let dir = c.path().join("plots");
-    let o = sky(&["atmosphere", "inspect", "atmospheres/analytic-hg.toml", "--wavelengths", "550", "--plot", dir.to_str().unwrap()], c.path());
+    let o = sky(
+        &[
+            "atmosphere",
+            "inspect",
+            "atmospheres/analytic-hg.toml",
+            "--wavelengths",
+            "550",
+            "--plot",
+            dir.to_str().unwrap(),
+        ],
+        c.path(),
+    );
     assert!(o.status.success(), "{:?}", text(&o));
     for f in ["profiles.png", "extinction_550nm.png", "optical_depth.png", "phase_hg-haze.png"] {
         let bytes = std::fs::read(dir.join(f)).unwrap_or_else(|_| panic!("{f} not written"));
@@ -119,7 +157,21 @@ fn mie_json_and_sign_convention() {
     for k in ["q_sca", "q_abs", "q_back", "g", "angles_deg", "s1_re", "s1_im", "s2_re", "s2_im", "phase_sr_inv"] {
         assert!(!v[k].is_null(), "missing {k}");
     }
-    let o = sky(&["mie", "--m", "1.33-1e-7i", "--lognormal", "4.0,0.55", "--wavelength-nm", "650", "--angles-deg", "0,90", "--json"], c.path());
+    let o = sky(
+        &[
+            "mie",
+            "--m",
+            "1.33-1e-7i",
+            "--lognormal",
+            "4.0,0.55",
+            "--wavelength-nm",
+            "650",
+            "--angles-deg",
+            "0,90",
+            "--json",
+        ],
+        c.path(),
+    );
     let v: Value = serde_json::from_slice(&o.stdout).unwrap();
     assert!(v["c_ext_um2"].as_f64().unwrap() > 100.0);
     assert_eq!(v["phase_sr_inv"].as_array().unwrap().len(), 2);
@@ -177,7 +229,10 @@ fn render_writes_exr_png_and_json() {
     assert_eq!(v["width"], 12);
     // stderr is not a terminal here: progress comes as plain lines.
     let err = text(&o).1;
-    assert!(err.lines().any(|l| l.starts_with("sky render: ") && l.contains(" px), ") && l.contains("ETA")), "no progress line: {err}");
+    assert!(
+        err.lines().any(|l| l.starts_with("sky render: ") && l.contains(" px), ") && l.contains("ETA")),
+        "no progress line: {err}"
+    );
     assert!(std::fs::read(&png_path).unwrap().starts_with(b"\x89PNG"));
     use exr::prelude::*;
     let img = read_all_flat_layers_from_file(&exr_path).unwrap();
@@ -235,7 +290,9 @@ fn spectral_lines_render_without_xyz() {
     assert!(names.iter().any(|x| x == "spectral.450nm") && names.iter().any(|x| x == "spectral.650nm"), "{names:?}");
     assert!(!names.iter().any(|x| x == "Y" || x == "X" || x == "Z"), "XYZ written without being estimated: {names:?}");
     // Without lines there is nothing to render; with a PNG there is nothing to tonemap.
-    for (extra, flag) in [(vec![] as Vec<&str>, "--spectral-nm"), (vec!["--spectral-nm", "550", "--png", "x.png"], "--png")] {
+    for (extra, flag) in
+        [(vec![] as Vec<&str>, "--spectral-nm"), (vec!["--spectral-nm", "550", "--png", "x.png"], "--png")]
+    {
         let mut a = vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--no-xyz", "--out", "x.exr"];
         a.extend(extra);
         let o = sky(&a, c.path());
@@ -250,15 +307,33 @@ fn render_bad_flags_exit_2() {
     for (args, flag) in [
         (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "130", "--out", "x.exr"], "--sun-zenith-deg"),
         (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--out", "x.png"], "--out"),
-        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--size", "0x5", "--out", "x.exr"], "--size"),
-        (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--camera", "directions", "--out", "x.exr"], "--directions"),
+        (
+            vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--size", "0x5", "--out", "x.exr"],
+            "--size",
+        ),
+        (
+            vec![
+                "render",
+                "atmospheres/clear.toml",
+                "--sun-zenith-deg",
+                "30",
+                "--camera",
+                "directions",
+                "--out",
+                "x.exr",
+            ],
+            "--directions",
+        ),
         (vec!["render", "atmospheres/clear.toml", "--sun-zenith-deg", "30", "--spp", "0", "--out", "x.exr"], "--spp"),
     ] {
         let o = sky(&args, c.path());
         assert_eq!(o.status.code(), Some(2), "{args:?}: {:?}", text(&o));
         assert!(text(&o).1.contains(flag), "{args:?}: {}", text(&o).1);
     }
-    let o = sky(&["render", "tests/bad_atmospheres/negative_sigma.toml", "--sun-zenith-deg", "30", "--out", "x.exr"], c.path());
+    let o = sky(
+        &["render", "tests/bad_atmospheres/negative_sigma.toml", "--sun-zenith-deg", "30", "--out", "x.exr"],
+        c.path(),
+    );
     assert_eq!(o.status.code(), Some(1));
     assert!(!root().join("x.exr").exists());
 }
@@ -268,7 +343,21 @@ fn ctrl_c_stops_a_render_and_writes_nothing() {
     let c = tempfile::tempdir().unwrap();
     let out = c.path().join("big.exr");
     let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(["render", "atmospheres/analytic-hg.toml", "--camera", "equirect", "--size", "512x256", "--sun-zenith-deg", "60", "--spp", "100000", "--band-nm", "47", "--out"])
+        .args([
+            "render",
+            "atmospheres/analytic-hg.toml",
+            "--camera",
+            "equirect",
+            "--size",
+            "512x256",
+            "--sun-zenith-deg",
+            "60",
+            "--spp",
+            "100000",
+            "--band-nm",
+            "47",
+            "--out",
+        ])
         .arg(&out)
         .current_dir(root())
         .env("SKY_CACHE_DIR", c.path())
@@ -283,7 +372,11 @@ fn ctrl_c_stops_a_render_and_writes_nothing() {
     assert!(!out.exists());
     // The journal stays, for --resume.
     assert!(c.path().join("big.exr.journal").exists());
-    let leftovers: Vec<_> = std::fs::read_dir(c.path()).unwrap().map(|e| e.unwrap().file_name()).filter(|n| n.to_string_lossy().starts_with(".sky-tmp")).collect();
+    let leftovers: Vec<_> = std::fs::read_dir(c.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .filter(|n| n.to_string_lossy().starts_with(".sky-tmp"))
+        .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 
@@ -292,9 +385,24 @@ fn farm_flags_and_files_are_checked() {
     let c = tempfile::tempdir().unwrap();
     let out = c.path().join("sky.exr");
     let out_s = out.to_str().unwrap();
-    let base = ["render", "atmospheres/analytic-hg.toml", "--sun-zenith-deg", "60", "--size", "4x4", "--spp", "2", "--out", out_s];
+    let base = [
+        "render",
+        "atmospheres/analytic-hg.toml",
+        "--sun-zenith-deg",
+        "60",
+        "--size",
+        "4x4",
+        "--spp",
+        "2",
+        "--out",
+        out_s,
+    ];
     // A worker without a token refuses to start, naming the ways to give one.
-    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(["worker", "--listen", "127.0.0.1:0"]).env_remove("SKY_FARM_TOKEN").output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["worker", "--listen", "127.0.0.1:0"])
+        .env_remove("SKY_FARM_TOKEN")
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).1.contains("--token-file"), "{}", text(&o).1);
     let o = sky(&["worker", "--listen", "not-an-address", "--token-file", "x"], c.path());
@@ -303,7 +411,12 @@ fn farm_flags_and_files_are_checked() {
     // A farm render without a token.
     let mut args: Vec<&str> = base.to_vec();
     args.extend(["--workers", "127.0.0.1:9"]);
-    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(&args).current_dir(root()).env_remove("SKY_FARM_TOKEN").output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(&args)
+        .current_dir(root())
+        .env_remove("SKY_FARM_TOKEN")
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).1.contains("token"), "{}", text(&o).1);
     // A broken farm file: the error names the file and the line.
@@ -326,7 +439,13 @@ fn farm_flags_and_files_are_checked() {
     // An unreachable worker fails the render clearly and writes nothing.
     let mut args: Vec<&str> = base.to_vec();
     args.extend(["--workers", "127.0.0.1:9", "--lease-s", "1"]);
-    let o = Command::new(env!("CARGO_BIN_EXE_sky")).args(&args).current_dir(root()).env("SKY_FARM_TOKEN", "t").env("SKY_CACHE_DIR", c.path()).output().unwrap();
+    let o = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(&args)
+        .current_dir(root())
+        .env("SKY_FARM_TOKEN", "t")
+        .env("SKY_CACHE_DIR", c.path())
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = text(&o).1;
     assert!(err.contains("no worker left") && err.contains("127.0.0.1:9"), "{err}");
@@ -340,8 +459,18 @@ fn farm_flags_and_files_are_checked() {
 fn closed_stdout_exits_quietly() {
     use std::process::Stdio;
     let c = tempfile::tempdir().unwrap();
-    for args in [&["mie", "--m", "1.33-1e-7i", "--x", "10", "--angles-deg", "0,1,2,3,4,5,10,20,30,60,90,120,150,180"][..], &["atmosphere", "inspect", "atmospheres/clear.toml"][..]] {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(root()).env("SKY_CACHE_DIR", c.path()).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    for args in [
+        &["mie", "--m", "1.33-1e-7i", "--x", "10", "--angles-deg", "0,1,2,3,4,5,10,20,30,60,90,120,150,180"][..],
+        &["atmosphere", "inspect", "atmospheres/clear.toml"][..],
+    ] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_sky"))
+            .args(args)
+            .current_dir(root())
+            .env("SKY_CACHE_DIR", c.path())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
         drop(child.stdout.take());
         let o = child.wait_with_output().unwrap();
         let err = String::from_utf8_lossy(&o.stderr);
@@ -356,7 +485,11 @@ fn closed_stdout_exits_quietly() {
 fn fault_flags_exist_only_with_the_test_feature() {
     let c = tempfile::tempdir().unwrap();
     let with = cfg!(feature = "fault-injection");
-    for args in [&["worker", "--fault-corrupt", "--help"][..], &["worker", "--fault-sigkill-on-task", "0", "--help"][..], &["render", "--fault-kill-after-columns", "3", "--help"][..]] {
+    for args in [
+        &["worker", "--fault-corrupt", "--help"][..],
+        &["worker", "--fault-sigkill-on-task", "0", "--help"][..],
+        &["render", "--fault-kill-after-columns", "3", "--help"][..],
+    ] {
         let o = sky(args, c.path());
         let err = text(&o).1;
         if with {

@@ -15,9 +15,7 @@
 //! that keeps it to a few minutes on two cores; `cargo test --release --test
 //! disort -- --ignored` runs the whole grid with more samples.
 
-mod common;
-
-use common::Family;
+use crate::common::Family;
 use serde_json::Value;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -42,7 +40,13 @@ struct Stats {
 /// at the directions in `view_zeniths` x `azimuths`, with `spp_for(name)`
 /// samples; a comparison is precise when its standard error is below a
 /// third of `tolerance` (relative), and must then be within it.
-fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn(&str) -> Option<u32>, tolerance: f64) -> Stats {
+fn run(
+    reference: &str,
+    view_zeniths: &[f64],
+    azimuths: &[f64],
+    spp_for: &dyn Fn(&str) -> Option<u32>,
+    tolerance: f64,
+) -> Stats {
     let r: Value = serde_json::from_str(&std::fs::read_to_string(root().join(reference)).unwrap()).unwrap();
     let mut st = Stats { family: Family::default(), beyond_tolerance_precise: vec![], precise: 0, seconds: vec![] };
     for (case_index, case) in r["cases"].as_array().unwrap().iter().enumerate() {
@@ -51,7 +55,8 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
         let Some(spp) = spp_for(&atm.name) else { continue };
         let l = case["wavelength_nm"].as_f64().unwrap();
         let vz: Vec<f64> = case["view_zenith_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let ra: Vec<f64> = case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let ra: Vec<f64> =
+            case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
         let mut dirs = Vec::new();
         let mut expect = Vec::new();
         for (i, z) in vz.iter().enumerate() {
@@ -64,14 +69,22 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
         }
         // A seed per case, so the cases' errors are independent.
         let seed_base: u64 = std::env::var("SKY_TEST_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(2023);
-        let settings = Settings::directions(dirs.clone(), case["sun_zenith_deg"].as_f64().unwrap(), vec![l], spp, seed_base + case_index as u64, false);
+        let settings = Settings::directions(
+            dirs.clone(),
+            case["sun_zenith_deg"].as_f64().unwrap(),
+            vec![l],
+            spp,
+            seed_base + case_index as u64,
+            false,
+        );
         let cache = MieCache::new(None);
         let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let t0 = std::time::Instant::now();
         let img = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
         let core_s = t0.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
         let e_sun = atm.sun.irradiance_w_m2_nm.eval(l);
-        let worst = img.pixels.iter().zip(&expect).map(|(px, want)| px.spectral_stderr[0] / e_sun / want).fold(0.0, f64::max);
+        let worst =
+            img.pixels.iter().zip(&expect).map(|(px, want)| px.spectral_stderr[0] / e_sun / want).fold(0.0, f64::max);
         st.seconds.push((format!("{} {l} nm", atm.name), core_s, worst));
         for (k, px) in img.pixels.iter().enumerate() {
             let ours = px.spectral[0] / e_sun;
@@ -79,7 +92,13 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
             let want = expect[k];
             let z = (ours - want) / se.max(1e-300);
             let rel = (ours - want).abs() / want;
-            let label = format!("{} {l} nm view ({}, {}): ours {ours:.6e} ± {se:.1e}, DISORT {want:.6e} ({z:+.2} se, {:.2} %)", atm.name, dirs[k].0, dirs[k].1, 100.0 * rel);
+            let label = format!(
+                "{} {l} nm view ({}, {}): ours {ours:.6e} ± {se:.1e}, DISORT {want:.6e} ({z:+.2} se, {:.2} %)",
+                atm.name,
+                dirs[k].0,
+                dirs[k].1,
+                100.0 * rel
+            );
             if se / want < tolerance / 3.0 {
                 st.precise += 1;
                 if rel > tolerance {
@@ -94,7 +113,13 @@ fn run(reference: &str, view_zeniths: &[f64], azimuths: &[f64], spp_for: &dyn Fn
 }
 
 fn check(st: &Stats, compared: usize, min_precise: usize, tolerance: f64) {
-    eprintln!("{} compared, aggregate Σz/√m {:+.2}, {} with se < {:.2} %", st.family.z.len(), st.family.aggregate(), st.precise, 100.0 * tolerance / 3.0);
+    eprintln!(
+        "{} compared, aggregate Σz/√m {:+.2}, {} with se < {:.2} %",
+        st.family.z.len(),
+        st.family.aggregate(),
+        st.precise,
+        100.0 * tolerance / 3.0
+    );
     // The variance falls as 1/n, so the worst direction reaches a relative
     // standard error of tolerance / 2 (a 2-sigma interval within the
     // tolerance) after (worst / (tolerance / 2))² times the samples.
@@ -106,7 +131,12 @@ fn check(st: &Stats, compared: usize, min_precise: usize, tolerance: f64) {
     assert!(st.precise >= min_precise, "too few precise comparisons to test the {} % criterion", 100.0 * tolerance);
     let failures = st.family.failures(0.01);
     assert!(failures.is_empty(), "disagreements with DISORT:\n{}", failures.join("\n"));
-    assert!(st.beyond_tolerance_precise.is_empty(), "beyond {} % where converged:\n{}", 100.0 * tolerance, st.beyond_tolerance_precise.join("\n"));
+    assert!(
+        st.beyond_tolerance_precise.is_empty(),
+        "beyond {} % where converged:\n{}",
+        100.0 * tolerance,
+        st.beyond_tolerance_precise.join("\n")
+    );
 }
 
 #[test]
@@ -114,7 +144,13 @@ fn path_tracer_agrees_with_disort() {
     // The Rayleigh slab with enough samples that many standard errors fall
     // below 0.33 %, so the 1 % criterion is exercised; the aerosol slab is
     // noisier per sample and is held mostly to the z-score criteria.
-    let st = run("tests/reference/disort.json", &[0.0, 40.0, 70.0, 85.0], &[0.0, 90.0, 180.0], &|name| Some(if name == "disort-rayleigh" { 80_000 } else { 20_000 }), 0.01);
+    let st = run(
+        "tests/reference/disort.json",
+        &[0.0, 40.0, 70.0, 85.0],
+        &[0.0, 90.0, 180.0],
+        &|name| Some(if name == "disort-rayleigh" { 80_000 } else { 20_000 }),
+        0.01,
+    );
     check(&st, 2 * 3 * 12, 10, 0.01);
 }
 

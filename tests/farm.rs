@@ -24,10 +24,25 @@ fn root() -> PathBuf {
 /// workers prepare it in a moment.
 fn render_args(out: &Path) -> Vec<String> {
     let atm = root().join("atmospheres/analytic-hg.toml");
-    ["render", atm.to_str().unwrap(), "--camera", "equirect", "--size", "32x6", "--spp", "12", "--sun-zenith-deg", "70", "--seed", "5", "--out", out.to_str().unwrap()]
-        .iter()
-        .map(|s| s.to_string())
-        .collect()
+    [
+        "render",
+        atm.to_str().unwrap(),
+        "--camera",
+        "equirect",
+        "--size",
+        "32x6",
+        "--spp",
+        "12",
+        "--sun-zenith-deg",
+        "70",
+        "--seed",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
 }
 
 struct Worker {
@@ -80,7 +95,8 @@ impl Farm {
             .unwrap();
         let mut line = String::new();
         BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
-        let addr = line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("worker said {line:?}")).to_string();
+        let addr =
+            line.trim().strip_prefix("listening on ").unwrap_or_else(|| panic!("worker said {line:?}")).to_string();
         self.workers.push(Worker { child, addr });
         self.workers.len() - 1
     }
@@ -92,7 +108,12 @@ impl Farm {
     /// `sky render` across the given workers with extra flags.
     fn render(&self, out: &str, which: &[usize], extra: &[&str]) -> Output {
         let mut args = render_args(&self.path(out));
-        args.extend(["--workers".to_string(), self.list(which), "--token-file".to_string(), self.path("token").to_str().unwrap().to_string()]);
+        args.extend([
+            "--workers".to_string(),
+            self.list(which),
+            "--token-file".to_string(),
+            self.path("token").to_str().unwrap().to_string(),
+        ]);
         args.extend(extra.iter().map(|s| s.to_string()));
         Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap()
     }
@@ -121,7 +142,11 @@ fn stderr(o: &Output) -> String {
 /// The JSON summary line (`{"event": "done", ...}`) of a --json-progress run.
 fn summary(o: &Output) -> serde_json::Value {
     let out = String::from_utf8_lossy(&o.stdout);
-    let line = out.lines().rev().find(|l| l.contains("\"done\"")).unwrap_or_else(|| panic!("no summary in {out}\n{}", stderr(o)));
+    let line = out
+        .lines()
+        .rev()
+        .find(|l| l.contains("\"done\""))
+        .unwrap_or_else(|| panic!("no summary in {out}\n{}", stderr(o)));
     serde_json::from_str(line).unwrap()
 }
 
@@ -154,7 +179,10 @@ fn three_workers_render_bit_identically_to_a_local_render() {
 }
 
 #[test]
-#[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
+#[cfg_attr(
+    not(feature = "fault-injection"),
+    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
+)]
 fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     let mut farm = Farm::new();
     let local = farm.local("local.exr");
@@ -175,7 +203,11 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     assert!(s["farm"]["requeued"].as_u64().unwrap() >= 3, "{s}");
     // With --json-progress the farm's events are JSON lines on stdout.
     let out = String::from_utf8_lossy(&o.stdout);
-    assert!(out.lines().any(|l| l.contains("\"event\":\"quarantined\"") && l.contains("invalid result: tile value 0 is NaN")), "no quarantine event for the garbage worker in\n{out}");
+    assert!(
+        out.lines()
+            .any(|l| l.contains("\"event\":\"quarantined\"") && l.contains("invalid result: tile value 0 is NaN")),
+        "no quarantine event for the garbage worker in\n{out}"
+    );
     // The stalled worker never delivered; its task was re-queued after the
     // lease or duplicated and won elsewhere.
     let st = workers.iter().find(|w| w["address"] == farm.workers[2].addr).unwrap();
@@ -183,7 +215,10 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
 }
 
 #[test]
-#[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
+#[cfg_attr(
+    not(feature = "fault-injection"),
+    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
+)]
 fn a_killed_coordinator_resumes_without_rendering_twice() {
     let mut farm = Farm::new();
     let local = farm.local("local.exr");
@@ -203,7 +238,8 @@ fn a_killed_coordinator_resumes_without_rendering_twice() {
     assert_eq!(resumed + rendered, 32, "columns rendered twice or lost: {s}");
     // And the workers rendered exactly the missing columns (duplicates aside).
     let dup = s["farm"]["duplicates"].as_u64().unwrap();
-    let by_workers: u64 = s["farm"]["workers"].as_array().unwrap().iter().map(|w| w["columns_done"].as_u64().unwrap()).sum();
+    let by_workers: u64 =
+        s["farm"]["workers"].as_array().unwrap().iter().map(|w| w["columns_done"].as_u64().unwrap()).sum();
     assert!(by_workers >= rendered && (dup > 0 || by_workers == rendered), "{s}");
 }
 
@@ -228,7 +264,10 @@ impl Drop for Reap {
 }
 
 #[test]
-#[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
+#[cfg_attr(
+    not(feature = "fault-injection"),
+    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
+)]
 fn verification_catches_a_worker_with_wrong_results() {
     use proto::{ControlAction, ControlRequest};
     let mut farm = Farm::new();
@@ -247,9 +286,22 @@ fn verification_catches_a_worker_with_wrong_results() {
     }
     std::thread::sleep(Duration::from_millis(300));
     let mut args = render_args(&farm.path("farm.exr"));
-    args.extend(["--workers".to_string(), farm.list(&[a, b, liar]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    args.extend([
+        "--workers".to_string(),
+        farm.list(&[a, b, liar]),
+        "--token-file".to_string(),
+        farm.path("token").to_str().unwrap().to_string(),
+    ]);
     args.extend(["--json-progress", "--verify-fraction", "1"].map(String::from));
-    let render = Reap(Some(Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap()));
+    let render = Reap(Some(
+        Command::new(SKY)
+            .args(&args)
+            .env("SKY_CACHE_DIR", "off")
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    ));
     // Wait (via the liar's Control RPC, which with no action only reports)
     // until the liar has delivered the whole image.
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
@@ -296,7 +348,11 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
     let good = farm.start("good", &[]);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     let uri = format!("http://{}", farm.workers[good].addr);
-    let hello = || proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+    let hello = || proto::HelloRequest {
+        protocol_version: sky::farm::PROTOCOL_VERSION,
+        build_version: sky::farm::build_version(),
+        coordinator: "test".into(),
+    };
     rt.block_on(async {
         // A wrong token.
         let mut c = connect(&uri, Some("not-the-token"), None, Duration::from_secs(5)).await.unwrap();
@@ -310,7 +366,15 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
         // Another protocol version in a task.
         let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
         let pv = sky::farm::PROTOCOL_VERSION;
-        let task = proto::RenderTask { protocol_version: 99, build_version: sky::farm::build_version(), job_hash: "x".into(), task_id: 1, first_column: 0, columns: 1, ..Default::default() };
+        let task = proto::RenderTask {
+            protocol_version: 99,
+            build_version: sky::farm::build_version(),
+            job_hash: "x".into(),
+            task_id: 1,
+            first_column: 0,
+            columns: 1,
+            ..Default::default()
+        };
         let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::FailedPrecondition);
         assert!(e.message().contains(&format!("farm protocol {pv}")) && e.message().contains("protocol 99"), "{e}");
@@ -333,11 +397,26 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
         };
         let mut big_client = c.clone().max_encoding_message_size(usize::MAX);
         let e = big_client.render(task).await.expect_err("refused");
-        assert!(matches!(e.code(), tonic::Code::ResourceExhausted | tonic::Code::OutOfRange | tonic::Code::InvalidArgument), "{e:?}");
-        assert!(e.message().to_lowercase().contains("message") || e.message().contains("size") || e.message().contains("large"), "{e:?}");
+        assert!(
+            matches!(e.code(), tonic::Code::ResourceExhausted | tonic::Code::OutOfRange | tonic::Code::InvalidArgument),
+            "{e:?}"
+        );
+        assert!(
+            e.message().to_lowercase().contains("message")
+                || e.message().contains("size")
+                || e.message().contains("large"),
+            "{e:?}"
+        );
         // A task whose optics and view do not match the job it claims.
-        let task =
-            proto::RenderTask { protocol_version: pv, build_version: sky::farm::build_version(), job_hash: "not-its-hash".into(), task_id: 3, first_column: 0, columns: 1, ..Default::default() };
+        let task = proto::RenderTask {
+            protocol_version: pv,
+            build_version: sky::farm::build_version(),
+            job_hash: "not-its-hash".into(),
+            task_id: 3,
+            first_column: 0,
+            columns: 1,
+            ..Default::default()
+        };
         let e = c.render(task).await.expect_err("refused");
         assert_eq!(e.code(), tonic::Code::InvalidArgument);
         assert!(e.message().contains("hash to"), "{e}");
@@ -357,7 +436,12 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
     });
     // A wrong token fails the render clearly.
     let mut args = render_args(&farm.path("tok.exr"));
-    args.extend(["--workers".into(), farm.list(&[good]), "--token-file".into(), farm.path("wrong-token").to_str().unwrap().into()]);
+    args.extend([
+        "--workers".into(),
+        farm.list(&[good]),
+        "--token-file".into(),
+        farm.path("wrong-token").to_str().unwrap().into(),
+    ]);
     let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap();
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("refused the token"), "{}", stderr(&o));
@@ -370,13 +454,20 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
 /// A coordinator refuses a worker of another protocol (one that claims 99),
 /// with a message naming both versions, and writes nothing.
 #[test]
-#[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
+#[cfg_attr(
+    not(feature = "fault-injection"),
+    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
+)]
 fn a_worker_of_another_protocol_is_refused() {
     let mut farm = Farm::new();
     let old = farm.start("old", &["--fault-protocol", "99"]);
     let o = farm.render("old.exr", &[old], &[]);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains(&format!("speaks farm protocol 99, this coordinator {}", sky::farm::PROTOCOL_VERSION)), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("speaks farm protocol 99, this coordinator {}", sky::farm::PROTOCOL_VERSION)),
+        "{}",
+        stderr(&o)
+    );
     assert!(!farm.path("old.exr").exists());
     assert!(farm.alive(old));
 }
@@ -396,7 +487,8 @@ fn a_paused_worker_gives_its_work_back() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")));
     let s = summary(&o);
-    let wb = s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["address"] == farm.workers[b].addr).unwrap().clone();
+    let wb =
+        s["farm"]["workers"].as_array().unwrap().iter().find(|w| w["address"] == farm.workers[b].addr).unwrap().clone();
     assert_eq!(wb["tasks_done"], 0, "{s}");
     assert!(wb["state"].as_str().unwrap().contains("paused"), "{s}");
 }
@@ -412,7 +504,8 @@ fn workers_speak_tls_when_given_a_certificate() {
     let ca = ca_params.self_signed(&ca_key).unwrap();
     let key = rcgen::KeyPair::generate().unwrap();
     let issuer = rcgen::Issuer::from_params(&ca_params, &ca_key);
-    let cert = rcgen::CertificateParams::new(vec!["sky-farm-test".to_string()]).unwrap().signed_by(&key, &issuer).unwrap();
+    let cert =
+        rcgen::CertificateParams::new(vec!["sky-farm-test".to_string()]).unwrap().signed_by(&key, &issuer).unwrap();
     std::fs::write(farm.path("ca.pem"), ca.pem()).unwrap();
     std::fs::write(farm.path("cert.pem"), cert.pem()).unwrap();
     std::fs::write(farm.path("key.pem"), key.serialize_pem()).unwrap();
@@ -441,11 +534,18 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
     let w = farm.start("w", &[]);
     // A long task: four directions at a million samples each.
     let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/analytic-hg.toml")).unwrap();
-    let mut settings = sky::render::Settings::directions(vec![(60.0, 0.0), (70.0, 90.0), (80.0, 180.0), (85.0, 0.0)], 60.0, vec![], 1_000_000, 1, false);
+    let mut settings = sky::render::Settings::directions(
+        vec![(60.0, 0.0), (70.0, 90.0), (80.0, 180.0), (85.0, 0.0)],
+        60.0,
+        vec![],
+        1_000_000,
+        1,
+        false,
+    );
     settings.spectral.xyz = true;
     // Optics without a prepared scene: the worker prepares them itself.
     let optics = sky::farm::job::message(&bundle, &settings.spectral, None);
-    let optics_hash = sky::session::optics_hash(&atm, &settings.spectral);
+    let optics_hash = sky::farm::job::optics_hash(&atm, &settings.spectral);
     let view_json = serde_json::to_string(&settings.view).unwrap();
     let task = |id: u64, optics: Option<proto::Optics>| proto::RenderTask {
         protocol_version: sky::farm::PROTOCOL_VERSION,
@@ -497,7 +597,11 @@ fn pausing_mid_task_hands_the_task_back_and_resume_restores_work() {
         assert_eq!(r.state, WorkerState::Idle as i32);
         // Resumed, it takes the job again (it kept the prepared optics, and
         // says so in its Hello).
-        let hello = proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+        let hello = proto::HelloRequest {
+            protocol_version: sky::farm::PROTOCOL_VERSION,
+            build_version: sky::farm::build_version(),
+            coordinator: "test".into(),
+        };
         assert_eq!(c.hello(hello).await.unwrap().into_inner().optics_held, vec![optics_hash.clone()]);
         let mut stream = c.render(task(3, None)).await.unwrap().into_inner();
         let first = stream.message().await.unwrap().unwrap();
@@ -529,13 +633,26 @@ fn schedule_and_owner_load_pause_a_worker() {
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(2);
     let _hogs = Hogs::start(cores);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
-    let hello = || proto::HelloRequest { protocol_version: sky::farm::PROTOCOL_VERSION, build_version: sky::farm::build_version(), coordinator: "test".into() };
+    let hello = || proto::HelloRequest {
+        protocol_version: sky::farm::PROTOCOL_VERSION,
+        build_version: sky::farm::build_version(),
+        coordinator: "test".into(),
+    };
     let result = rt.block_on(async {
-        let mut c = connect(&format!("http://{}", farm.workers[off_hours].addr), Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let mut c = connect(
+            &format!("http://{}", farm.workers[off_hours].addr),
+            Some("s3cret-farm-token"),
+            None,
+            Duration::from_secs(5),
+        )
+        .await
+        .unwrap();
         let r = c.hello(hello()).await.unwrap().into_inner();
         assert_eq!((r.state, r.paused_reason.as_str()), (WorkerState::Paused as i32, "schedule"), "window {window}");
         // The load policy samples every 5 s and pauses after two busy samples.
-        let mut c = connect(&format!("http://{polite_addr}"), Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap();
+        let mut c = connect(&format!("http://{polite_addr}"), Some("s3cret-farm-token"), None, Duration::from_secs(5))
+            .await
+            .unwrap();
         for _ in 0..60 {
             let r = c.hello(hello()).await.unwrap().into_inner();
             if r.state == WorkerState::Paused as i32 {
@@ -549,8 +666,14 @@ fn schedule_and_owner_load_pause_a_worker() {
     // A render on the paused worker alone says why it waits, in its log
     // (stderr is not a terminal here), instead of waiting in silence.
     let mut args = render_args(&farm.path("waiting.exr"));
-    args.extend(["--workers".to_string(), farm.list(&[off_hours]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
-    let mut child = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stderr(std::process::Stdio::piped()).spawn().unwrap();
+    args.extend([
+        "--workers".to_string(),
+        farm.list(&[off_hours]),
+        "--token-file".to_string(),
+        farm.path("token").to_str().unwrap().to_string(),
+    ]);
+    let mut child =
+        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stderr(std::process::Stdio::piped()).spawn().unwrap();
     let err = child.stderr.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -608,8 +731,12 @@ impl Drop for Hogs {
 
 /// The clear sky (its optics weigh about 19 MB) and a tiny equirect view
 /// of it at 4 spp, hero wavelengths.
-fn clear_equirect(width: usize, height: usize) -> (sky::atmosphere::Atmosphere, sky::atmosphere::Bundle, sky::render::Settings) {
-    use sky::render::{camera::Camera, Settings, WavelengthSampling};
+fn clear_equirect(
+    width: usize,
+    height: usize,
+) -> (sky::atmosphere::Atmosphere, sky::atmosphere::Bundle, sky::render::Settings) {
+    use sky::directions::Camera;
+    use sky::render::{Settings, WavelengthSampling};
     let (atm, bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
     let mut s = Settings::directions(vec![], 60.0, vec![], 4, 3, false);
     s.spectral.xyz = true;
@@ -624,8 +751,8 @@ fn clear_equirect(width: usize, height: usize) -> (sky::atmosphere::Atmosphere, 
 /// worker is connected and greeted once and gets the optics at most once;
 /// every view is bit-identical to a direct render. Prints the bytes each
 /// worker was sent against what protocol 1 sent (the job with its optics on
-/// the first task of every view): `cargo test --release --test farm
-/// a_bake -- --nocapture`.
+/// the first task of every view): `cargo test --release --test suite --
+/// farm::a_bake --nocapture`.
 #[test]
 fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
     use sky::farm::coordinator::{Options, WorkerSpec};
@@ -634,9 +761,21 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
     let a = farm.start("a", &[]);
     let b = farm.start("b", &[]);
     let (atm, bundle, s) = clear_equirect(4, 4);
-    let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
+    let workers: Vec<WorkerSpec> = [a, b]
+        .iter()
+        .map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) })
+        .collect();
     let opts = Options { token: Some("s3cret-farm-token".into()), ..Options::default() };
-    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), workers, opts, &|| {});
+    let session = Session::new(
+        atm,
+        bundle,
+        s.spectral.clone(),
+        &OpticsCache::default(),
+        &sky::mie::MieCache::new(None),
+        workers,
+        opts,
+        &|| {},
+    );
     let job = session.job(&s.view);
     let optics_bytes = prost::Message::encoded_len(job.optics.message()) as u64;
     let protocol1_job_bytes = optics_bytes + job.view_json.len() as u64;
@@ -648,20 +787,37 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
         let mut view = s.view.clone();
         view.sun_zenith_deg = 1.0 + 1.4 * i as f64;
         view.sun_azimuth_deg = (37 * i % 360) as f64;
-        let r = session.render_view(&view, Arc::new(AtomicBool::new(false))).unwrap_or_else(|e| panic!("view {i}: {e}"));
+        let r =
+            session.render_view(&view, Arc::new(AtomicBool::new(false))).unwrap_or_else(|e| panic!("view {i}: {e}"));
         if i % 16 == 0 {
             let want = sky::render::render(&session.scene, &view, &AtomicBool::new(false), &|| {}).unwrap();
             assert!(r.image == want, "view {i}: the farm's render differs from a direct one");
         }
         for w in &r.stats.workers {
             let t = totals.entry(w.address.clone()).or_default();
-            for (k, v) in [w.connects, w.hellos, w.optics_sent, w.optics_bytes, w.request_bytes, w.tasks_done, (w.tasks_done > 0) as u64].into_iter().enumerate() {
+            for (k, v) in [
+                w.connects,
+                w.hellos,
+                w.optics_sent,
+                w.optics_bytes,
+                w.request_bytes,
+                w.tasks_done,
+                (w.tasks_done > 0) as u64,
+            ]
+            .into_iter()
+            .enumerate()
+            {
                 t[k] += v;
             }
         }
     }
     assert_eq!(totals.len(), 2);
-    eprintln!("64 views of {}x{} px, clear sky (optics {:.1} MB), 2 workers:", s.view.width, s.view.height, optics_bytes as f64 / 1e6);
+    eprintln!(
+        "64 views of {}x{} px, clear sky (optics {:.1} MB), 2 workers:",
+        s.view.width,
+        s.view.height,
+        optics_bytes as f64 / 1e6
+    );
     for (addr, [connects, hellos, optics_sent, sent_optics_bytes, request_bytes, tasks, views]) in &totals {
         eprintln!(
             "  worker {addr}: {tasks} tasks in {views} views; {connects} connection, {hellos} hello; optics sent {optics_sent}x ({:.1} MB); all requests {:.2} MB (protocol 1: {:.0} MB, the job on the first task of each of its {views} views)",
@@ -674,7 +830,10 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
         assert_eq!(*optics_sent, 1, "worker {addr} got the optics {optics_sent} times");
         assert_eq!(*sent_optics_bytes, optics_bytes);
         // Everything but the one copy of the optics is small: views and headers.
-        assert!(*request_bytes < optics_bytes + 2_000 * tasks, "worker {addr}: {request_bytes} bytes for {tasks} tasks");
+        assert!(
+            *request_bytes < optics_bytes + 2_000 * tasks,
+            "worker {addr}: {request_bytes} bytes for {tasks} tasks"
+        );
     }
 }
 
@@ -689,10 +848,17 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
     let mut farm = Farm::new();
     let a = farm.start("a", &[]);
     let b = farm.start("b", &[]);
-    let workers: Vec<WorkerSpec> = [a, b].iter().map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) }).collect();
-    let shared = SharedFarm::new(workers, Options { token: Some("s3cret-farm-token".into()), max_batch: 2, ..Options::default() });
+    let workers: Vec<WorkerSpec> = [a, b]
+        .iter()
+        .map(|&i| WorkerSpec::Remote { name: None, uri: format!("http://{}", farm.workers[i].addr) })
+        .collect();
+    let shared = SharedFarm::new(
+        workers,
+        Options { token: Some("s3cret-farm-token".into()), max_batch: 2, ..Options::default() },
+    );
     let (clear, clear_bundle, s) = clear_equirect(6, 3);
-    let (hazed, hazed_bundle) = sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/hazed.toml")).unwrap();
+    let (hazed, hazed_bundle) =
+        sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/hazed.toml")).unwrap();
     let (optics, mie) = (OpticsCache::default(), sky::mie::MieCache::new(None));
     let sessions = [
         Session::on_farm(clear, clear_bundle, s.spectral.clone(), &optics, &mie, shared.clone(), &|| {}),
@@ -700,14 +866,24 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
     ];
     assert_ne!(sessions[0].optics_hash(), sessions[1].optics_hash());
     // Two views of each, of different heights: four parts.
-    let views: Vec<(usize, sky::render::View)> =
-        [(0, 3), (1, 3), (0, 5), (1, 2)].into_iter().map(|(k, height)| (k, sky::render::View { height, sun_zenith_deg: 40.0 + 10.0 * height as f64, ..s.view.clone() })).collect();
-    let parts = views.iter().map(|(k, v)| FarmPart { job: sessions[*k].job(v), resumed: Default::default(), journal: None }).collect();
+    let views: Vec<(usize, sky::render::View)> = [(0, 3), (1, 3), (0, 5), (1, 2)]
+        .into_iter()
+        .map(|(k, height)| {
+            (k, sky::render::View { height, sun_zenith_deg: 40.0 + 10.0 * height as f64, ..s.view.clone() })
+        })
+        .collect();
+    let parts = views
+        .iter()
+        .map(|(k, v)| FarmPart { job: sessions[*k].job(v), resumed: Default::default(), journal: None })
+        .collect();
     let out = shared.render_parts(parts, Arc::new(AtomicBool::new(false))).unwrap();
     assert_eq!(out.parts.len(), 4);
     for ((k, v), columns) in views.iter().zip(&out.parts) {
         let want = sky::render::render(&sessions[*k].scene, v, &AtomicBool::new(false), &|| {}).unwrap();
-        assert!(image_of_columns(columns, v.width, v.height) == want, "a part of atmosphere {k} differs from its direct render");
+        assert!(
+            image_of_columns(columns, v.width, v.height) == want,
+            "a part of atmosphere {k} differs from its direct render"
+        );
     }
     assert!(out.busy_core_s.iter().all(|&s| s > 0.0), "{:?}", out.busy_core_s);
     assert_eq!(out.stats.columns_total, 24);
@@ -719,10 +895,20 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
     assert!(out.stats.workers.iter().all(|w| w.tasks_done > 0), "{:?}", out.stats.workers);
     // A second render on the same farm greets nobody again, and no worker
     // gets an atmosphere's optics a second time.
-    let again = shared.render_parts(vec![FarmPart { job: sessions[1].job(&views[1].1), resumed: Default::default(), journal: None }], Arc::new(AtomicBool::new(false))).unwrap();
+    let again = shared
+        .render_parts(
+            vec![FarmPart { job: sessions[1].job(&views[1].1), resumed: Default::default(), journal: None }],
+            Arc::new(AtomicBool::new(false)),
+        )
+        .unwrap();
     for (w, before) in again.stats.workers.iter().zip(&out.stats.workers) {
         assert_eq!((w.address.as_str(), w.connects, w.hellos), (before.address.as_str(), 0, 0), "{w:?}");
-        assert!(before.optics_sent + w.optics_sent <= 2, "worker {} got optics {} times for two atmospheres", w.address, before.optics_sent + w.optics_sent);
+        assert!(
+            before.optics_sent + w.optics_sent <= 2,
+            "worker {} got optics {} times for two atmospheres",
+            w.address,
+            before.optics_sent + w.optics_sent
+        );
     }
 }
 
@@ -733,13 +919,25 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
 /// above on a loaded CI machine), and Hello counts them as held. The worker
 /// takes 3 s more to unpack (a fault), so both calls land while it does.
 #[test]
-#[cfg_attr(not(feature = "fault-injection"), ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection")]
+#[cfg_attr(
+    not(feature = "fault-injection"),
+    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
+)]
 fn a_task_without_optics_waits_for_optics_still_unpacking() {
     use sky::session::{OpticsCache, Session};
     let mut farm = Farm::new();
     let w = farm.start("w", &["--fault-slow-unpack-ms", "3000"]);
     let (atm, bundle, s) = clear_equirect(2, 2);
-    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &sky::mie::MieCache::new(None), vec![], Default::default(), &|| {});
+    let session = Session::new(
+        atm,
+        bundle,
+        s.spectral.clone(),
+        &OpticsCache::default(),
+        &sky::mie::MieCache::new(None),
+        vec![],
+        Default::default(),
+        &|| {},
+    );
     let job = session.job(&s.view);
     let pv = sky::farm::PROTOCOL_VERSION;
     let task = |id: u64, first: u32, optics: bool| proto::RenderTask {
@@ -756,14 +954,25 @@ fn a_task_without_optics_waits_for_optics_still_unpacking() {
     let uri = format!("http://{}", farm.workers[w].addr);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
-        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5)).await.unwrap().max_encoding_message_size(usize::MAX);
+        let mut c = connect(&uri, Some("s3cret-farm-token"), None, Duration::from_secs(5))
+            .await
+            .unwrap()
+            .max_encoding_message_size(usize::MAX);
         // The first task brings the optics and is dropped at once.
         drop(c.render(task(1, 0, true)).await.expect("the task with the optics is taken"));
-        let hello = proto::HelloRequest { protocol_version: pv, build_version: sky::farm::build_version(), coordinator: "test".into() };
+        let hello = proto::HelloRequest {
+            protocol_version: pv,
+            build_version: sky::farm::build_version(),
+            coordinator: "test".into(),
+        };
         let held = c.hello(hello).await.unwrap().into_inner().optics_held;
         assert!(held.contains(&job.optics.hash), "the optics being unpacked are not in Hello's list: {held:?}");
         // The second comes without them, and gets its tile.
-        let mut stream = c.render(task(2, 1, false)).await.unwrap_or_else(|e| panic!("the task without optics was refused: {e}")).into_inner();
+        let mut stream = c
+            .render(task(2, 1, false))
+            .await
+            .unwrap_or_else(|e| panic!("the task without optics was refused: {e}"))
+            .into_inner();
         let mut tile = None;
         while let Some(ev) = stream.message().await.unwrap() {
             if let Some(proto::render_event::Event::Tile(t)) = ev.event {
@@ -790,22 +999,43 @@ fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
     // The bake's JSON lines: its progress events, then its summary.
     let bake_to = |out: &str, farm_args: &[String]| {
         let o = Command::new(SKY)
-            .args(["bake-luts", bake.to_str().unwrap(), "--out", farm.path(out).to_str().unwrap(), "--json", "--json-progress"])
+            .args([
+                "bake-luts",
+                bake.to_str().unwrap(),
+                "--out",
+                farm.path(out).to_str().unwrap(),
+                "--json",
+                "--json-progress",
+            ])
             .args(farm_args)
             .env("SKY_CACHE_DIR", "off")
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
-        String::from_utf8_lossy(&o.stdout).lines().map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()).collect::<Vec<_>>()
+        String::from_utf8_lossy(&o.stdout)
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .collect::<Vec<_>>()
     };
-    let events = bake_to("farm", &["--workers".to_string(), farm.list(&[a, b]), "--token-file".to_string(), farm.path("token").to_str().unwrap().to_string()]);
+    let events = bake_to(
+        "farm",
+        &[
+            "--workers".to_string(),
+            farm.list(&[a, b]),
+            "--token-file".to_string(),
+            farm.path("token").to_str().unwrap().to_string(),
+        ],
+    );
     let on_farm = events.last().unwrap().clone();
     // Two workers of one thread: the first ETA is about the forecast over
     // two (over one, as it was before the workers' threads were waited
     // for, it would be about the whole forecast).
     let forecast = events.iter().find(|e| e["event"] == "forecast").unwrap()["core_seconds"].as_f64().unwrap();
     let first_eta = events.iter().filter(|e| e["event"] == "progress").find_map(|e| e["eta_s"].as_f64()).unwrap();
-    assert!(first_eta < 0.75 * forecast, "first ETA {first_eta} s against a forecast of {forecast} core-seconds on two threads");
+    assert!(
+        first_eta < 0.75 * forecast,
+        "first ETA {first_eta} s against a forecast of {forecast} core-seconds on two threads"
+    );
     bake_to("local", &[]);
     for k in on_farm["skies"].as_array().unwrap() {
         assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(63), Some(1)), "{on_farm}");
@@ -816,6 +1046,9 @@ fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
         assert_eq!((k["slices_rendered"].as_u64(), k["slices_cached"].as_u64()), (Some(63), Some(1)), "{on_farm}");
     }
     for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"] {
-        assert!(std::fs::read(farm.path("farm").join(f)).unwrap() == std::fs::read(farm.path("local").join(f)).unwrap(), "{f} differs between the farm's bake and the embedded worker's");
+        assert!(
+            std::fs::read(farm.path("farm").join(f)).unwrap() == std::fs::read(farm.path("local").join(f)).unwrap(),
+            "{f} differs between the farm's bake and the embedded worker's"
+        );
     }
 }

@@ -6,12 +6,10 @@
 //! no ceiling, against the sky (the talk: global fog "has the same
 //! radiance at infinity as the sky").
 
-mod common;
-
-use common::Family;
+use crate::common::Family;
 use sky::atmosphere::Atmosphere;
+use sky::directions::camera::direction_deg;
 use sky::mie::MieCache;
-use sky::render::camera::direction_deg;
 use sky::render::fog::Fog;
 use sky::render::guide::RayGuide;
 use sky::render::kernel::{Kernel, Scratch};
@@ -52,7 +50,12 @@ const ALPHA: f64 = 0.01;
 /// for a LUT would show).
 #[test]
 fn the_fogs_first_vertex_matches_the_quadrature() {
-    let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+    let spectral = SpectralSettings {
+        band_nm: 40.0,
+        wavelength_sampling: WavelengthSampling::Hero,
+        spectral_nm: vec![550.0],
+        xyz: false,
+    };
     // (sky, sun zenith, observer km, ceiling km, [(view zenith, distance km)])
     type Case<'a> = (&'a str, f64, f64, Option<f64>, &'a [(f64, f64)]);
     let cases: [Case; 5] = [
@@ -72,7 +75,13 @@ fn the_fogs_first_vertex_matches_the_quadrature() {
         let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, altitude_km);
         for (j, &(view_zenith_deg, distance_km)) in views.iter().enumerate() {
             let fog = Fog::lit(distance_km, ceiling_km);
-            let make = |skip: bool| Tracer::new(&scene.medium, sp, sun, 0.533, Estimator::Full).with_sun_disk(false).with_columns(&scene.columns).with_single_skipped(skip).with_fog(Some(fog));
+            let make = |skip: bool| {
+                Tracer::new(&scene.medium, sp, sun, 0.533, Estimator::Full)
+                    .with_sun_disk(false)
+                    .with_columns(&scene.columns)
+                    .with_single_skipped(skip)
+                    .with_fog(Some(fog))
+            };
             let (lit, shadowed) = (make(false), make(true));
             let origin = lit.observer(altitude_km);
             let d = direction_deg(view_zenith_deg, 150.0);
@@ -80,8 +89,12 @@ fn the_fogs_first_vertex_matches_the_quadrature() {
             let mut scratch = Scratch::default();
             let (mut m1, mut m2, mut total) = (0.0, 0.0, 0.0);
             for k in 0..samples {
-                let a = Kernel::single(&lit).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(11, j as u64, k)).scattered[0];
-                let b = Kernel::single(&shadowed).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(11, j as u64, k)).scattered[0];
+                let a = Kernel::single(&lit)
+                    .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(11, j as u64, k))
+                    .scattered[0];
+                let b = Kernel::single(&shadowed)
+                    .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(11, j as u64, k))
+                    .scattered[0];
                 m1 += a - b;
                 m2 += (a - b) * (a - b);
                 total += a;
@@ -125,7 +138,12 @@ fn directions(dirs: &[(f64, f64)], sun_zenith_deg: f64, spp: u32, seed: u64, fog
 /// darker still.
 #[test]
 fn fog_at_infinite_depth_is_the_sky() {
-    let spectral = SpectralSettings { band_nm: 10.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![], xyz: true };
+    let spectral = SpectralSettings {
+        band_nm: 10.0,
+        wavelength_sampling: WavelengthSampling::Hero,
+        spectral_nm: vec![],
+        xyz: true,
+    };
     let dirs = [(0.0, 0.0), (40.0, 0.0), (60.0, 180.0), (80.0, 90.0), (87.0, 0.0), (89.0, 180.0)];
     let mut family = Family::default();
     for name in ["clear", "cloudy1"] {
@@ -140,10 +158,16 @@ fn fog_at_infinite_depth_is_the_sky() {
             let se = a.xyz_stderr[1].hypot(b.xyz_stderr[1]);
             let z = (b.xyz[1] - a.xyz[1]) / se;
             let label = format!("{name}, view ({zenith}, {azimuth})");
-            eprintln!("{label}: sky Y {:.5e}, fog at infinity {:.5e} (z {z:+.2}); 5 km under 3 km {:.4e}, shadowed {:.4e}", a.xyz[1], b.xyz[1], near.pixels[k].xyz[1], shadowed.pixels[k].xyz[1]);
+            eprintln!(
+                "{label}: sky Y {:.5e}, fog at infinity {:.5e} (z {z:+.2}); 5 km under 3 km {:.4e}, shadowed {:.4e}",
+                a.xyz[1], b.xyz[1], near.pixels[k].xyz[1], shadowed.pixels[k].xyz[1]
+            );
             family.push(label.clone(), z);
             assert!(near.pixels[k].xyz[1] < 0.9 * a.xyz[1], "{label}: the near fog is not darker than the sky");
-            assert!(shadowed.pixels[k].xyz[1] < near.pixels[k].xyz[1], "{label}: the Shadowed Fog is not darker than the fog");
+            assert!(
+                shadowed.pixels[k].xyz[1] < near.pixels[k].xyz[1],
+                "{label}: the Shadowed Fog is not darker than the fog"
+            );
             assert!(shadowed.pixels[k].xyz[1] > 0.0, "{label}: the Shadowed Fog is black");
         }
     }

@@ -17,9 +17,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-mod common;
-
-use common::SplitMix64 as Rng;
+use crate::common::SplitMix64 as Rng;
 
 const SEED: u64 = 0x5EED_F022;
 
@@ -45,14 +43,24 @@ impl Tally {
             Ok(Ok(refused)) => self.errors += refused as u64,
             Ok(Err(why)) => self.failures.push(format!("{what}: seed {SEED:#x} case {case}: {why}")),
             Err(p) => {
-                let msg = p.downcast_ref::<String>().cloned().or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string())).unwrap_or_default();
+                let msg = p
+                    .downcast_ref::<String>()
+                    .cloned()
+                    .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
+                    .unwrap_or_default();
                 self.failures.push(format!("{what}: seed {SEED:#x} case {case}: PANIC {msg}"));
             }
         }
     }
 
     fn report(&self, what: &str, started: Instant) {
-        println!("fuzz {what}: {} cases ({} refused with errors), {} failures, {:.1} s, seed {SEED:#x}", self.cases, self.errors, self.failures.len(), started.elapsed().as_secs_f64());
+        println!(
+            "fuzz {what}: {} cases ({} refused with errors), {} failures, {:.1} s, seed {SEED:#x}",
+            self.cases,
+            self.errors,
+            self.failures.len(),
+            started.elapsed().as_secs_f64()
+        );
         for f in self.failures.iter().take(20) {
             println!("  {f}");
         }
@@ -112,8 +120,28 @@ const KEYS: [&str; 24] = [
     "radius_range_um",
     "zz_unknown",
 ];
-const TOKENS: [&str; 20] =
-    ["=", "[", "]", "[[", "]]", "{", "}", "\"", "'''", ",", "#", "\n", "[[aerosol]]\n", "[[profile]]\n", "[planet]\n", "name = \"x\"\n", "profile = \"nope\"\n", "é", "💥", "\\u{0}"];
+const TOKENS: [&str; 20] = [
+    "=",
+    "[",
+    "]",
+    "[[",
+    "]]",
+    "{",
+    "}",
+    "\"",
+    "'''",
+    ",",
+    "#",
+    "\n",
+    "[[aerosol]]\n",
+    "[[profile]]\n",
+    "[planet]\n",
+    "name = \"x\"\n",
+    "profile = \"nope\"\n",
+    "é",
+    "💥",
+    "\\u{0}",
+];
 
 fn line_bounds(b: &[u8], at: usize) -> (usize, usize) {
     let at = at.min(b.len());
@@ -160,7 +188,9 @@ fn mutate(text: &[u8], rng: &mut Rng) -> Vec<u8> {
                 // A number (the next run of digits, signs, dots and exponents) replaced.
                 if let Some(s) = (at..b.len()).find(|&i| b[i].is_ascii_digit()) {
                     let s = (0..s).rev().take_while(|&i| b"+-.".contains(&b[i])).last().unwrap_or(s);
-                    let e = (s..b.len()).find(|&i| !(b[i].is_ascii_digit() || b"+-.eE_".contains(&b[i]))).unwrap_or(b.len());
+                    let e = (s..b.len())
+                        .find(|&i| !(b[i].is_ascii_digit() || b"+-.eE_".contains(&b[i])))
+                        .unwrap_or(b.len());
                     b.splice(s..e, rng.pick(&NUMBERS).bytes());
                 }
             }
@@ -196,7 +226,11 @@ struct Corpus {
 fn corpus() -> Corpus {
     let mut files = Vec::new();
     for dir in ["atmospheres", "tests/bad_atmospheres", "tests/atmospheres"] {
-        let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(dir)).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "toml")).collect();
+        let mut v: Vec<PathBuf> = std::fs::read_dir(root().join(dir))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+            .collect();
         v.sort();
         for p in v {
             let text = std::fs::read(&p).unwrap();
@@ -300,9 +334,10 @@ struct Valid {
 
 fn valid() -> Valid {
     let (atm, bundle) = Atmosphere::load_bundle(&root().join("atmospheres/clear.toml")).unwrap();
-    let settings = Settings::directions(vec![(10.0, 20.0), (60.0, 0.0), (80.0, 90.0)], 60.0, vec![450.0, 550.0], 8, 7, false);
+    let settings =
+        Settings::directions(vec![(10.0, 20.0), (60.0, 0.0), (80.0, 90.0)], 60.0, vec![450.0, 550.0], 8, 7, false);
     let optics = job::message(&bundle, &settings.spectral, None);
-    let optics_hash = sky::session::optics_hash(&atm, &settings.spectral);
+    let optics_hash = sky::farm::job::optics_hash(&atm, &settings.spectral);
     let view_json = serde_json::to_string(&settings.view).unwrap();
     let hash = job::job_hash(&optics_hash, &view_json);
     let task = proto::RenderTask {
@@ -316,7 +351,15 @@ fn valid() -> Valid {
         optics: Some(optics.clone()),
         view_json,
     };
-    let px = |v: f64| PixelResult { xyz: [v, v, v], xyz_direct: [0.0; 3], xyz_stderr: [0.1; 3], spectral: vec![v, v], spectral_stderr: vec![0.01, 0.01], samples: 8, paths_cut: 0 };
+    let px = |v: f64| PixelResult {
+        xyz: [v, v, v],
+        xyz_direct: [0.0; 3],
+        xyz_stderr: [0.1; 3],
+        spectral: vec![v, v],
+        spectral_stderr: vec![0.01, 0.01],
+        samples: 8,
+        paths_cut: 0,
+    };
     let tile = tile::encode(&hash, 4, 1, 1, 2, &[vec![px(1.0)], vec![px(2.0)]]);
     Valid { optics, task, tile, height: 1, lines: 2, spp: 8 }
 }
@@ -327,7 +370,11 @@ fn valid() -> Valid {
 /// against their hash. Errors are gRPC statuses with a message.
 fn worker_takes(task: &proto::RenderTask) -> Result<bool, String> {
     let status = |s: tonic::Status| -> Result<bool, String> {
-        if s.message().trim().is_empty() || s.code() == tonic::Code::Ok || s.code() == tonic::Code::Unknown || s.code() == tonic::Code::Internal {
+        if s.message().trim().is_empty()
+            || s.code() == tonic::Code::Ok
+            || s.code() == tonic::Code::Unknown
+            || s.code() == tonic::Code::Internal
+        {
             return Err(format!("unnamed error {s:?}"));
         }
         Ok(true)
@@ -351,7 +398,15 @@ fn worker_takes(task: &proto::RenderTask) -> Result<bool, String> {
 
 /// The coordinator's check of a tile for the valid task.
 fn tile_accepted(t: &proto::Tile, v: &Valid) -> Result<bool, String> {
-    let want = tile::Expect { job_hash: &v.task.job_hash, task_id: v.task.task_id, first_column: v.task.first_column, columns: v.task.columns, height: v.height, lines: v.lines, spp: v.spp };
+    let want = tile::Expect {
+        job_hash: &v.task.job_hash,
+        task_id: v.task.task_id,
+        first_column: v.task.first_column,
+        columns: v.task.columns,
+        height: v.height,
+        lines: v.lines,
+        spp: v.spp,
+    };
     match tile::decode(t, &want) {
         Ok(cols) if cols.len() == v.task.columns as usize => Ok(false),
         Ok(cols) => Err(format!("accepted {} columns for a {}-column task", cols.len(), v.task.columns)),
@@ -362,7 +417,19 @@ fn tile_accepted(t: &proto::Tile, v: &Valid) -> Result<bool, String> {
 
 fn weird_f64(rng: &mut Rng) -> f64 {
     let any = f64::from_bits(rng.next());
-    *rng.pick(&[f64::NAN, -f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -1.0, -0.0, 0.0, 1e308, f64::MIN_POSITIVE, 5e-324, any])
+    *rng.pick(&[
+        f64::NAN,
+        -f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        -1.0,
+        -0.0,
+        0.0,
+        1e308,
+        f64::MIN_POSITIVE,
+        5e-324,
+        any,
+    ])
 }
 
 fn weird_u32(rng: &mut Rng) -> u32 {
@@ -389,7 +456,9 @@ fn mutate_task(v: &Valid, rng: &mut Rng) -> proto::RenderTask {
                 let i = rng.below(j.files.len());
                 match rng.below(3) {
                     0 => drop(j.files.remove(i)),
-                    1 => j.files[i].name = String::from_utf8_lossy(&mutate(j.files[i].name.as_bytes(), rng)).into_owned(),
+                    1 => {
+                        j.files[i].name = String::from_utf8_lossy(&mutate(j.files[i].name.as_bytes(), rng)).into_owned()
+                    }
                     _ => j.files[i].content = mutate(&j.files[i].content, rng),
                 }
             }
@@ -474,7 +543,8 @@ fn fuzz_farm(cases: u64) {
     assert_eq!(worker_takes(&v.task), Ok(false), "the valid task is taken");
     assert_eq!(tile_accepted(&v.tile, &v), Ok(false), "the valid tile is accepted");
     let (task_bytes, tile_bytes) = (v.task.encode_to_vec(), v.tile.encode_to_vec());
-    let event_bytes = proto::RenderEvent { event: Some(proto::render_event::Event::Tile(v.tile.clone())) }.encode_to_vec();
+    let event_bytes =
+        proto::RenderEvent { event: Some(proto::render_event::Event::Tile(v.tile.clone())) }.encode_to_vec();
     let mut tally = Tally::default();
     let started = Instant::now();
     for case in 0..cases {
@@ -501,7 +571,9 @@ fn fuzz_farm(cases: u64) {
                 let b = mutate_bytes(&event_bytes, &mut rng);
                 tally.run("farm event (bytes)", case, || match proto::RenderEvent::decode(b.as_slice()) {
                     Err(_) => Ok(true),
-                    Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) }) => tile_accepted(&t, &v),
+                    Ok(proto::RenderEvent { event: Some(proto::render_event::Event::Tile(t)) }) => {
+                        tile_accepted(&t, &v)
+                    }
                     Ok(_) => Ok(false),
                 })
             }

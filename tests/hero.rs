@@ -13,9 +13,7 @@
 //! false-alarm rate for the whole test (see `common`). On the old companions the aggregate
 //! z's were about −7 (X) and +6 (Z) at these sample counts.
 
-mod common;
-
-use common::Family;
+use crate::common::Family;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
 use sky::render::{self, Scene, Settings, WavelengthSampling};
@@ -29,7 +27,8 @@ fn root() -> PathBuf {
 #[test]
 fn hero_agrees_with_single_band_at_47_nm_bands() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
-    let dirs: Vec<(f64, f64)> = [0.0, 30.0, 60.0, 80.0].iter().flat_map(|&z| [0.0, 60.0, 120.0, 180.0].map(|a| (z, a))).collect();
+    let dirs: Vec<(f64, f64)> =
+        [0.0, 30.0, 60.0, 80.0].iter().flat_map(|&z| [0.0, 60.0, 120.0, 180.0].map(|a| (z, a))).collect();
     let cache = MieCache::new(None);
     let run = |ws: WavelengthSampling, spp: u32, seed: u64| {
         let s = {
@@ -56,7 +55,10 @@ fn hero_agrees_with_single_band_at_47_nm_bands() {
             let se = (a.xyz_stderr[c].powi(2) + b.xyz_stderr[c].powi(2)).sqrt();
             let z = (a.xyz[c] - b.xyz[c]) / se;
             rel_se.push(se / b.xyz[c]);
-            eprintln!("channel {c} dir {:?}: hero {:.5e} ± {:.1e}, single {:.5e} ± {:.1e}, z {z:+.2}", dirs[k], a.xyz[c], a.xyz_stderr[c], b.xyz[c], b.xyz_stderr[c]);
+            eprintln!(
+                "channel {c} dir {:?}: hero {:.5e} ± {:.1e}, single {:.5e} ± {:.1e}, z {z:+.2}",
+                dirs[k], a.xyz[c], a.xyz_stderr[c], b.xyz[c], b.xyz_stderr[c]
+            );
             family.push(format!("channel {c} dir {:?}", dirs[k]), z);
         }
         eprintln!("channel {c}: aggregate z {:+.2}", family.aggregate());

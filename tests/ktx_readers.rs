@@ -9,7 +9,7 @@
 //! skip it.
 
 use serde_json::{json, Value};
-use sky::lut::colour::ColourSpace;
+use sky::colour::ColourSpace;
 use sky::lut::ktx2::{self, ArrayTexture};
 use sky::lut::texels::{texel_index, Texels};
 use sky::lut::{r11g11b10, rgba16f};
@@ -49,7 +49,9 @@ fn ktx_parse(file: &Path, data: bool) -> Value {
     if data {
         cmd.arg("--data");
     }
-    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap_or_else(|e| panic!("cannot run node ({e}): install Node.js (and run `npm ci --prefix tests/ktx_parse`)"));
+    let mut child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap_or_else(|e| {
+        panic!("cannot run node ({e}): install Node.js (and run `npm ci --prefix tests/ktx_parse`)")
+    });
     let start = Instant::now();
     // Drain stdout on a thread so a large output cannot block the child.
     let mut stdout = child.stdout.take().unwrap();
@@ -85,15 +87,35 @@ fn ktx_parse_reads_our_files() {
     let manifest = r#"{"basis":"hazed","colour_space":"rec2020","scale":0.001}"#;
 
     let (w, h, l) = (32u32, 128u32, 64u32);
-    let rgb: Vec<[f64; 3]> = (0..w * h * l).map(|i| [f64::from(i % w), f64::from((i / w) % h), f64::from(i / (w * h))]).collect();
+    let rgb: Vec<[f64; 3]> =
+        (0..w * h * l).map(|i| [f64::from(i % w), f64::from((i / w) % h), f64::from(i / (w * h))]).collect();
     let (words, _) = r11g11b10::pack_array(&rgb).unwrap();
     let path = dir.path().join("hazed.ktx2");
-    let size = ktx2::write(&path, &ArrayTexture { width: w, height: h, layers: l, colour_space: ColourSpace::Rec2020, texels: Texels::B10G11R11(&words), sky_json: manifest }).unwrap();
+    let size = ktx2::write(
+        &path,
+        &ArrayTexture {
+            width: w,
+            height: h,
+            layers: l,
+            colour_space: ColourSpace::Rec2020,
+            texels: Texels::B10G11R11(&words),
+            sky_json: manifest,
+        },
+    )
+    .unwrap();
     let r = ktx_parse(&path, true);
     assert_eq!(r["fileByteLength"], size);
-    for (key, want) in
-        [("vkFormat", 122), ("typeSize", 4), ("pixelWidth", 32), ("pixelHeight", 128), ("pixelDepth", 0), ("layerCount", 64), ("faceCount", 1), ("levelCount", 1), ("supercompressionScheme", 0)]
-    {
+    for (key, want) in [
+        ("vkFormat", 122),
+        ("typeSize", 4),
+        ("pixelWidth", 32),
+        ("pixelHeight", 128),
+        ("pixelDepth", 0),
+        ("layerCount", 64),
+        ("faceCount", 1),
+        ("levelCount", 1),
+        ("supercompressionScheme", 0),
+    ] {
         assert_eq!(r[key], want, "{key}");
     }
     let level = &r["levels"][0];
@@ -113,9 +135,13 @@ fn ktx_parse_reads_our_files() {
         })
     );
     let writer = format!("sky {}", env!("CARGO_PKG_VERSION"));
-    assert_eq!(r["keyValue"], json!([["KTXorientation", "rd"], ["KTXwriter", writer], ["sky", format!("{manifest}\0")]]));
+    assert_eq!(
+        r["keyValue"],
+        json!([["KTXorientation", "rd"], ["KTXwriter", writer], ["sky", format!("{manifest}\0")]])
+    );
     let hex = r["level0Hex"].as_str().unwrap();
-    let back: Vec<u32> = (0..hex.len() / 8).map(|i| u32::from_str_radix(&hex[8 * i..8 * i + 8], 16).unwrap().swap_bytes()).collect();
+    let back: Vec<u32> =
+        (0..hex.len() / 8).map(|i| u32::from_str_radix(&hex[8 * i..8 * i + 8], 16).unwrap().swap_bytes()).collect();
     assert_eq!(back, words);
     // Texel (x, y) of layer 9 holds (x, y, 9) (row-major, layer after layer).
     assert_eq!(r11g11b10::unpack(back[texel_index(w, h, 9, 5, 100)]), [5.0, 100.0, 9.0]);
@@ -123,9 +149,23 @@ fn ktx_parse_reads_our_files() {
     let rgb: Vec<[f64; 3]> = (0..4 * 3 * 2).map(|i| [f64::from(i), 0.25, 7e4]).collect();
     let (halves, _) = rgba16f::pack_array(&rgb).unwrap();
     let path = dir.path().join("godot.ktx2");
-    ktx2::write(&path, &ArrayTexture { width: 4, height: 3, layers: 2, colour_space: ColourSpace::Xyz, texels: Texels::Rgba16f(&halves), sky_json: "{}" }).unwrap();
+    ktx2::write(
+        &path,
+        &ArrayTexture {
+            width: 4,
+            height: 3,
+            layers: 2,
+            colour_space: ColourSpace::Xyz,
+            texels: Texels::Rgba16f(&halves),
+            sky_json: "{}",
+        },
+    )
+    .unwrap();
     let r = ktx_parse(&path, true);
-    assert_eq!((r["vkFormat"].as_u64(), r["typeSize"].as_u64(), r["layerCount"].as_u64()), (Some(97), Some(2), Some(2)));
+    assert_eq!(
+        (r["vkFormat"].as_u64(), r["typeSize"].as_u64(), r["layerCount"].as_u64()),
+        (Some(97), Some(2), Some(2))
+    );
     assert_eq!(r["levels"][0]["byteOffset"].as_u64().unwrap() % 8, 0);
     let dfd = &r["dataFormatDescriptor"][0];
     assert_eq!((dfd["colorPrimaries"].as_u64(), dfd["bytesPlane"][0].as_u64()), (Some(5), Some(8)));
@@ -133,6 +173,7 @@ fn ktx_parse_reads_our_files() {
     let signed = |ch: u32, off: u32| json!({"bitOffset": off, "bitLength": 15, "channelType": ch, "samplePosition": [0, 0, 0, 0], "sampleLower": 0xBF80_0000u32 as i32, "sampleUpper": 0x3F80_0000});
     assert_eq!(dfd["samples"], json!([signed(0xC0, 0), signed(0xC1, 16), signed(0xC2, 32), signed(0xCF, 48)]));
     let hex = r["level0Hex"].as_str().unwrap();
-    let back: Vec<u16> = (0..hex.len() / 4).map(|i| u16::from_str_radix(&hex[4 * i..4 * i + 4], 16).unwrap().swap_bytes()).collect();
+    let back: Vec<u16> =
+        (0..hex.len() / 4).map(|i| u16::from_str_radix(&hex[4 * i..4 * i + 4], 16).unwrap().swap_bytes()).collect();
     assert_eq!(back, halves.concat());
 }

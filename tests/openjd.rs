@@ -23,7 +23,13 @@ fn openjd() -> PathBuf {
 
 fn run(cmd: &mut Command) -> Output {
     let o = cmd.env("SKY_CACHE_DIR", "off").output().unwrap();
-    assert!(o.status.success(), "{:?} failed:\n{}\n{}", cmd, String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(
+        o.status.success(),
+        "{:?} failed:\n{}\n{}",
+        cmd,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
     o
 }
 
@@ -51,10 +57,18 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
     // The plan renders nothing.
     assert!(!job.join("manifest.json").exists());
     let text = std::fs::read_to_string(&template).unwrap();
-    assert!(text.contains("\"clear:0\"") && text.contains("\"hazed:63\"") && text.contains("\"hazed:fog:63\""), "{text}");
+    assert!(
+        text.contains("\"clear:0\"") && text.contains("\"hazed:63\"") && text.contains("\"hazed:fog:63\""),
+        "{text}"
+    );
 
     run(Command::new(openjd()).arg("check").arg(&template));
-    let log = run(Command::new(openjd()).arg("run").arg(&template).arg("-p").arg(format!("file://{}", s(&params))).args(["--step", "Pack", "--run-dependencies"]));
+    let log = run(Command::new(openjd())
+        .arg("run")
+        .arg(&template)
+        .arg("-p")
+        .arg(format!("file://{}", s(&params)))
+        .args(["--step", "Pack", "--run-dependencies"]));
     let log = String::from_utf8_lossy(&log.stdout);
     assert!(log.contains("Chunks run: 257"), "256 render tasks and the pack step:\n{log}");
 
@@ -77,22 +91,34 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
         .unwrap();
     std::fs::remove_file(first).unwrap();
     let again = tmp.path().join("again");
-    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"]).env("SKY_CACHE_DIR", "off").output().unwrap();
+    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
+        .env("SKY_CACHE_DIR", "off")
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     // Slices 47 and 48 are both the horizon (the talk's two ranges meet
     // there), so they share a cache entry: losing it loses both.
     assert!(
-        err.contains("lacks 1 of the bake's slices") || err.contains("lacks 2 of the bake's slices (clear:47, clear:48)") || err.contains("lacks 2 of the bake's slices (hazed:47, hazed:48)"),
+        err.contains("lacks 1 of the bake's slices")
+            || err.contains("lacks 2 of the bake's slices (clear:47, clear:48)")
+            || err.contains("lacks 2 of the bake's slices (hazed:47, hazed:48)"),
         "{err}"
     );
     assert!(!again.join("manifest.json").exists());
-    for p in std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "slice")) {
+    for p in std::fs::read_dir(&cache)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "slice"))
+    {
         if cached.get(p.file_stem().unwrap().to_str().unwrap()).is_some_and(|s| s.width == 8) {
             std::fs::remove_file(p).unwrap();
         }
     }
-    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"]).env("SKY_CACHE_DIR", "off").output().unwrap();
+    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
+        .env("SKY_CACHE_DIR", "off")
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("clear:fog:0, clear:fog:1"), "{err}");

@@ -5,10 +5,10 @@
 #![cfg(feature = "preview")]
 
 use glam::DVec3;
+use sky::directions::camera::direction_deg;
 use sky::lut::decode::Luts;
 use sky::preview::gpu::Gpu;
 use sky::preview::sky_pass::{SkyPass, Weather};
-use sky::render::camera::direction_deg;
 use std::path::PathBuf;
 use std::process::Command;
 use std::sync::{Mutex, OnceLock};
@@ -54,7 +54,13 @@ fn cpu_spread(luts: &Luts, w: &Weather, d: DVec3) -> [f64; 3] {
     let (zenith, azimuth) = (d.z.clamp(-1.0, 1.0).acos().to_degrees(), d.y.atan2(d.x).to_degrees());
     let mut m = [0.0f64; 3];
     for (dz, da) in [(step_deg, 0.0), (-step_deg, 0.0), (0.0, step_deg), (0.0, -step_deg)] {
-        let p = luts.sample(w.sun_elevation_deg, w.sun_azimuth_deg, w.haziness, w.cloudiness, direction_deg(zenith + dz, azimuth + da));
+        let p = luts.sample(
+            w.sun_elevation_deg,
+            w.sun_azimuth_deg,
+            w.haziness,
+            w.cloudiness,
+            direction_deg(zenith + dz, azimuth + da),
+        );
         for k in 0..3 {
             m[k] = m[k].max((p[k] - c[k]).abs());
         }
@@ -98,7 +104,10 @@ fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     eprintln!("adapter: {}", gpu.describe());
     let pass = SkyPass::new(&gpu, luts).unwrap();
-    let dirs: Vec<Option<glam::DVec3>> = (0..=24).flat_map(|i| (0..24).map(move |j| Some(direction_deg(7.5 * i as f64, 15.0 * j as f64)))).chain([None]).collect();
+    let dirs: Vec<Option<glam::DVec3>> = (0..=24)
+        .flat_map(|i| (0..24).map(move |j| Some(direction_deg(7.5 * i as f64, 15.0 * j as f64))))
+        .chain([None])
+        .collect();
     let elevations = [63.1, 41.7, 23.3, 8.2, 3.1, 2.6, 2.4, 0.4, -0.9, -2.7, -7.5, -9.95];
     let weathers = [(0.0, 0.0), (1.0, 0.0), (0.3, 0.1), (0.6, 0.25), (0.0, 0.3)];
     let (mut worst, mut compared, mut steep) = (0.0f64, 0, 0);
@@ -106,8 +115,10 @@ fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
         for &(haziness, cloudiness) in &weathers {
             let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: 7.0, haziness, cloudiness, sun_disk: false };
             let gpu_rgb = pass.decode(&gpu, luts, &weather, &dirs).unwrap().rgb;
-            let cpu: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| luts.sample(e, 7.0, haziness, cloudiness, d))).collect();
-            let spread: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| cpu_spread(luts, &weather, d))).collect();
+            let cpu: Vec<[f64; 3]> =
+                dirs.iter().map(|d| d.map_or([0.0; 3], |d| luts.sample(e, 7.0, haziness, cloudiness, d))).collect();
+            let spread: Vec<[f64; 3]> =
+                dirs.iter().map(|d| d.map_or([0.0; 3], |d| cpu_spread(luts, &weather, d))).collect();
             let brightest = cpu.iter().flatten().fold(0.0f64, |m, &x| m.max(x));
             assert!(brightest > 0.0, "sun {e}, h {haziness}, c {cloudiness}: a black sky");
             for (i, (g, c)) in gpu_rgb.iter().zip(&cpu).enumerate() {
@@ -139,15 +150,17 @@ fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
 /// centre within 1e-5 rad of it may fall on either side in f32.
 #[test]
 fn the_gpu_draws_the_sun_disk_the_cpu_decoder_draws() {
-    use sky::lut::decode::{mat_mul, pixel_directions};
-    use sky::render::camera::Camera;
+    use sky::colour::apply as mat_mul;
+    use sky::directions::camera::Camera;
+    use sky::lut::decode::pixel_directions;
     let luts = bake();
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     let pass = SkyPass::new(&gpu, luts).unwrap();
     let m = luts.manifest.colour.xyz_from_rgb;
     for (e, az) in [(20.0, 30.0), (3.0, 200.0)] {
-        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.3, cloudiness: 0.0, sun_disk: true };
+        let weather =
+            Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.3, cloudiness: 0.0, sun_disk: true };
         let camera = Camera::Pinhole { azimuth_deg: az, elevation_deg: e, fov_deg: 2.0 };
         let (w, h) = (48, 48);
         let dirs = pixel_directions(&camera, w, h);
@@ -168,7 +181,8 @@ fn the_gpu_draws_the_sun_disk_the_cpu_decoder_draws() {
             let g = mat_mul(&m, gpu_rgb[i].map(f64::from));
             let spread = cpu_spread(luts, &weather, d);
             for k in 0..3 {
-                let allowed = 1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
+                let allowed =
+                    1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
                 assert!((g[k] - cpu[i][k]).abs() <= allowed, "sun {e} up at {az}, pixel {i} ({angle} rad from the sun's centre), channel {k}: GPU {} against CPU {}", g[k], cpu[i][k]);
             }
         }
@@ -203,7 +217,9 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     let (sky_pass, landscape) = (SkyPass::new(&gpu, luts).unwrap(), LandscapePass::new(&gpu, luts).unwrap());
     let m = luts.manifest.colour.xyz_from_rgb;
-    let dirs: Vec<Option<DVec3>> = (0..=40).flat_map(|i| (0..120).map(move |j| Some(direction_deg(96.0 - 0.25 * i as f64, 3.0 * j as f64 + 0.7)))).collect();
+    let dirs: Vec<Option<DVec3>> = (0..=40)
+        .flat_map(|i| (0..120).map(move |j| Some(direction_deg(96.0 - 0.25 * i as f64, 3.0 * j as f64 + 0.7))))
+        .collect();
     let marginal = |d: &DVec3| {
         let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
         RIDGES.iter().any(|r| (elevation - top_elevation_deg(r, azimuth)).abs() < 1e-3)
@@ -240,7 +256,7 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
                     continue;
                 }
                 ridges += 1;
-                let g = sky::lut::decode::mat_mul(&m, rendered.rgb[i].map(f64::from));
+                let g = sky::colour::apply(&m, rendered.rgb[i].map(f64::from));
                 for c in 0..3 {
                     let diff = (g[c] - cpu[i][c]).abs();
                     assert!(
@@ -270,24 +286,31 @@ fn the_gpu_landscape_is_the_cpu_decoders() {
 /// still.
 #[test]
 fn a_cloud_gbuffer_switch_is_blended_over_frames() {
+    use sky::directions::camera::Camera;
     use sky::lut::decode::pixel_directions;
     use sky::preview::cloud_coverage::default_coverage;
     use sky::preview::clouds::{Amortisation, CloudSettings, Clouds};
     use sky::preview::frame::Frame;
-    use sky::render::camera::Camera;
     let luts = bake();
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     let sky_pass = SkyPass::new(&gpu, luts).unwrap();
     let mut clouds = Clouds::new(&gpu, &default_coverage(), 32, 1).unwrap();
     let dirs = pixel_directions(&Camera::Fisheye, 64, 64);
-    let weather = Weather { sun_elevation_deg: 35.0, sun_azimuth_deg: 60.0, haziness: 0.2, cloudiness: 0.0, sun_disk: false };
+    let weather =
+        Weather { sun_elevation_deg: 35.0, sun_azimuth_deg: 60.0, haziness: 0.2, cloudiness: 0.0, sun_disk: false };
     let schedule = Amortisation { frames_per_sample: 2, blend_frames: 8 };
     let mut pictures: Vec<Vec<f64>> = Vec::new();
     let mut swaps = Vec::new();
     for frame in 0..40u32 {
         // 8 frames a G-buffer (4 marches a texel, each over 2 frames); the wind moves on at each cycle's start.
-        let settings = CloudSettings { cover: 0.5, samples: 4, steps: 24, wind_offset_km: [3.0 * f64::from(frame / 8), 0.0], ..CloudSettings::default() };
+        let settings = CloudSettings {
+            cover: 0.5,
+            samples: 4,
+            steps: 24,
+            wind_offset_km: [3.0 * f64::from(frame / 8), 0.0],
+            ..CloudSettings::default()
+        };
         let report = clouds.step(&gpu, &weather, &settings, &schedule).unwrap();
         if report.swapped {
             swaps.push(frame);
@@ -306,7 +329,11 @@ fn a_cloud_gbuffer_switch_is_blended_over_frames() {
     assert!(whole > 0.01 * mean, "the clouds did not move: a change of {whole} on a mean of {mean}");
     for frame in 24..=31 {
         let step = change(&pictures[frame - 1], &pictures[frame]);
-        eprintln!("frame {frame}: changed by {:.3} % of the mean (the whole switch: {:.3} %)", 100.0 * step / mean, 100.0 * whole / mean);
+        eprintln!(
+            "frame {frame}: changed by {:.3} % of the mean (the whole switch: {:.3} %)",
+            100.0 * step / mean,
+            100.0 * whole / mean
+        );
         assert!(step <= 1.5 * whole / 8.0, "frame {frame}: the picture changed by {step}, the whole switch by {whole}");
     }
 }
@@ -363,7 +390,10 @@ fn sky_preview_renders_a_timeline_frame_by_frame() {
         }
         assert!(out.join(format!("sky.{k:04}.png")).is_file());
         let (e, a) = sky::look::solar::sun_position_deg(35.0, 172, 8.0 + k as f64);
-        assert!((f["state"]["sun_elevation_deg"].as_f64().unwrap() - e).abs() < 1e-9 && (f["state"]["sun_azimuth_deg"].as_f64().unwrap() - a).abs() < 1e-9);
+        assert!(
+            (f["state"]["sun_elevation_deg"].as_f64().unwrap() - e).abs() < 1e-9
+                && (f["state"]["sun_azimuth_deg"].as_f64().unwrap() - a).abs() < 1e-9
+        );
         assert!((f["state"]["wind_offset_km"][0].as_f64().unwrap() - 60.0 * k as f64).abs() < 1e-9, "{f}");
     }
     assert!(out.join("coverage.png").is_file());
@@ -395,7 +425,9 @@ fn the_fog_under_clouds_takes_its_occlusion_from_the_grid() {
     let (sky_pass, landscape) = (SkyPass::new(&gpu, luts).unwrap(), LandscapePass::new(&gpu, luts).unwrap());
     let mut clouds = Clouds::new(&gpu, &default_coverage(), 32, 1).unwrap();
     let m = luts.manifest.colour.xyz_from_rgb;
-    let dirs: Vec<Option<DVec3>> = (0..=20).flat_map(|i| (0..60).map(move |j| Some(direction_deg(96.0 - 0.5 * i as f64, 6.0 * j as f64 + 0.7)))).collect();
+    let dirs: Vec<Option<DVec3>> = (0..=20)
+        .flat_map(|i| (0..60).map(move |j| Some(direction_deg(96.0 - 0.5 * i as f64, 6.0 * j as f64 + 0.7))))
+        .collect();
     let (e, az, haziness, cloudiness) = (50.0, 30.0, 0.3, 0.1);
     let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness, cloudiness, sun_disk: false };
     let mut means = Vec::new();
@@ -403,23 +435,33 @@ fn the_fog_under_clouds_takes_its_occlusion_from_the_grid() {
         let settings = CloudSettings { cover, samples: 1, steps: 16, ..CloudSettings::default() };
         clouds.compute(&gpu, &weather, &settings, 0).unwrap();
         let view = clouds.occlusion_grid();
-        let grid = OcclusionGrid { view: &view, half_span_km: 0.5 * CUMULUS_SPAN_KM, top_km: settings.base_km, planet_radius_km: settings.planet_radius_km };
+        let grid = OcclusionGrid {
+            view: &view,
+            half_span_km: 0.5 * CUMULUS_SPAN_KM,
+            top_km: settings.base_km,
+            planet_radius_km: settings.planet_radius_km,
+        };
         let mut frame = Frame::new(&gpu, &dirs).unwrap();
         sky_pass.encode(&gpu, &mut frame, luts, &weather).unwrap();
-        landscape.encode(&gpu, &mut frame, luts, &weather, &Ground { albedo: 0.15, cloud_occlusion: 0.0 }, Some(&grid)).unwrap();
+        landscape
+            .encode(&gpu, &mut frame, luts, &weather, &Ground { albedo: 0.15, cloud_occlusion: 0.0 }, Some(&grid))
+            .unwrap();
         let rendered = frame.finish().unwrap();
         let mut occlusions = Vec::new();
         for (i, d) in dirs.iter().enumerate() {
             let d = d.unwrap();
             let (elevation, azimuth) = (d.z.asin().to_degrees(), d.y.atan2(d.x).to_degrees());
-            if ridge_depth_km(elevation, azimuth).is_none() || RIDGES.iter().any(|r| (elevation - top_elevation_deg(r, azimuth)).abs() < 1e-3) {
+            if ridge_depth_km(elevation, azimuth).is_none()
+                || RIDGES.iter().any(|r| (elevation - top_elevation_deg(r, azimuth)).abs() < 1e-3)
+            {
                 continue;
             }
             let occlusion = rendered.alpha[i];
             assert!((0.0..=1.0).contains(&occlusion), "cover {cover}, direction {i}: occlusion {occlusion}");
             occlusions.push(occlusion as f64);
-            let cpu = landscape_toward(luts, &[Some(d)], e, az, haziness, cloudiness, occlusion as f64, 0.15).unwrap()[0];
-            let g = sky::lut::decode::mat_mul(&m, rendered.rgb[i].map(f64::from));
+            let cpu =
+                landscape_toward(luts, &[Some(d)], e, az, haziness, cloudiness, occlusion as f64, 0.15).unwrap()[0];
+            let g = sky::colour::apply(&m, rendered.rgb[i].map(f64::from));
             for c in 0..3 {
                 assert!(
                     (g[c] - cpu[c]).abs() <= 1e-3 * cpu[c].abs() + 1e-6 * cpu[1].abs().max(1e-9),
@@ -431,7 +473,10 @@ fn the_fog_under_clouds_takes_its_occlusion_from_the_grid() {
         }
         let mean = occlusions.iter().sum::<f64>() / occlusions.len() as f64;
         let (low, high) = occlusions.iter().fold((1.0f64, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
-        eprintln!("cover {cover}: {} terrain views, occlusion mean {mean:.3}, from {low:.3} to {high:.3}", occlusions.len());
+        eprintln!(
+            "cover {cover}: {} terrain views, occlusion mean {mean:.3}, from {low:.3} to {high:.3}",
+            occlusions.len()
+        );
         if cover == 0.0 {
             assert_eq!(high, 0.0, "occlusion without clouds");
         }
@@ -447,7 +492,7 @@ fn the_fog_under_clouds_takes_its_occlusion_from_the_grid() {
 struct Golden {
     name: &'static str,
     state: sky::look::timeline::FrameState,
-    camera: sky::render::camera::Camera,
+    camera: sky::directions::camera::Camera,
     clouds: bool,
     /// Mean and 99th percentile of FLIP against the stored picture.
     mean: f32,
@@ -474,32 +519,61 @@ struct Golden {
 /// pictures by far more.
 #[test]
 fn the_preview_draws_its_golden_scenes() {
+    use sky::colour::apply as mat_mul;
+    use sky::directions::camera::Camera;
     use sky::look::timeline::FrameState;
-    use sky::lut::decode::mat_mul;
     use sky::preview::cloud_coverage::default_coverage;
     use sky::preview::clouds::Amortisation;
     use sky::preview::landscape::Ground;
     use sky::preview::session::{CloudOptions, PreviewOptions, PreviewSession};
-    use sky::render::camera::Camera;
     use sky::render::{output, Image, PixelResult};
     let luts = bake();
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
-    let state = |sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, cumulus_cover: f64| FrameState {
-        frame: 0,
-        hours: None,
-        sun_elevation_deg,
-        sun_azimuth_deg,
-        haziness,
-        cloudiness,
-        cumulus_cover,
-        wind_offset_km: [0.0, 0.0],
-    };
+    let state =
+        |sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, cumulus_cover: f64| FrameState {
+            frame: 0,
+            hours: None,
+            sun_elevation_deg,
+            sun_azimuth_deg,
+            haziness,
+            cloudiness,
+            cumulus_cover,
+            wind_offset_km: [0.0, 0.0],
+        };
     let pinhole = |azimuth_deg: f64, elevation_deg: f64| Camera::Pinhole { azimuth_deg, elevation_deg, fov_deg: 90.0 };
     let scenes = [
-        Golden { name: "clear-noon", state: state(70.0, -90.0, 0.0, 0.0, 0.0), camera: Camera::Fisheye, clouds: false, mean: 0.01, p99: 0.1 },
-        Golden { name: "hazy-sunset", state: state(3.0, 0.0, 0.7, 0.0, 0.0), camera: pinhole(0.0, 4.0), clouds: false, mean: 0.01, p99: 0.1 },
-        Golden { name: "cumulus-afternoon", state: state(35.0, 120.0, 0.2, 0.0, 0.5), camera: pinhole(100.0, 15.0), clouds: true, mean: 0.05, p99: 0.5 },
-        Golden { name: "cloudy-twilight", state: state(-3.0, 250.0, 0.3, 0.15, 0.3), camera: pinhole(250.0, 5.0), clouds: true, mean: 0.05, p99: 0.5 },
+        Golden {
+            name: "clear-noon",
+            state: state(70.0, -90.0, 0.0, 0.0, 0.0),
+            camera: Camera::Fisheye,
+            clouds: false,
+            mean: 0.01,
+            p99: 0.1,
+        },
+        Golden {
+            name: "hazy-sunset",
+            state: state(3.0, 0.0, 0.7, 0.0, 0.0),
+            camera: pinhole(0.0, 4.0),
+            clouds: false,
+            mean: 0.01,
+            p99: 0.1,
+        },
+        Golden {
+            name: "cumulus-afternoon",
+            state: state(35.0, 120.0, 0.2, 0.0, 0.5),
+            camera: pinhole(100.0, 15.0),
+            clouds: true,
+            mean: 0.05,
+            p99: 0.5,
+        },
+        Golden {
+            name: "cloudy-twilight",
+            state: state(-3.0, 250.0, 0.3, 0.15, 0.3),
+            camera: pinhole(250.0, 5.0),
+            clouds: true,
+            mean: 0.05,
+            p99: 0.5,
+        },
     ];
     let update = std::env::var_os("SKY_GOLDEN_UPDATE").is_some();
     let (w, h) = (96, 64);
@@ -507,12 +581,22 @@ fn the_preview_draws_its_golden_scenes() {
     let mut failures = Vec::new();
     for scene in &scenes {
         let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
-        let clouds = scene.clouds.then(|| CloudOptions { coverage: default_coverage(), gbuffer_size: 64, samples: 2, schedule: Amortisation { frames_per_sample: 8, blend_frames: 16 } });
-        let options = PreviewOptions { sun_disk: true, ground: Some(Ground { albedo: 0.15, cloud_occlusion: 0.0 }), clouds };
+        let clouds = scene.clouds.then(|| CloudOptions {
+            coverage: default_coverage(),
+            gbuffer_size: 64,
+            samples: 2,
+            schedule: Amortisation { frames_per_sample: 8, blend_frames: 16 },
+        });
+        let options =
+            PreviewOptions { sun_disk: true, ground: Some(Ground { albedo: 0.15, cloud_occlusion: 0.0 }), clouds };
         let mut session = PreviewSession::new(gpu, luts, options).unwrap();
         let out = session.render(&scene.state, &scene.camera, w, h).unwrap();
         let m = luts.manifest.colour.xyz_from_rgb;
-        let image = Image { width: w, height: h, pixels: out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect() };
+        let image = Image {
+            width: w,
+            height: h,
+            pixels: out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect(),
+        };
         let drawn = scratch.path().join(format!("{}.png", scene.name));
         output::write_png(&drawn, &image, 0.0, None).unwrap();
         let golden = root().join("tests/golden").join(format!("{}.png", scene.name));
@@ -520,9 +604,18 @@ fn the_preview_draws_its_golden_scenes() {
             std::fs::copy(&drawn, &golden).unwrap();
             continue;
         }
-        let rgb = |path: &std::path::Path| image::open(path).unwrap_or_else(|e| panic!("{}: {e} (make golden-update writes it)", path.display())).to_rgb8();
+        let rgb = |path: &std::path::Path| {
+            image::open(path)
+                .unwrap_or_else(|e| panic!("{}: {e} (make golden-update writes it)", path.display()))
+                .to_rgb8()
+        };
         let (reference, test) = (rgb(&golden), rgb(&drawn));
-        assert_eq!((reference.width(), reference.height()), (w as u32, h as u32), "{}: the stored picture's size", scene.name);
+        assert_eq!(
+            (reference.width(), reference.height()),
+            (w as u32, h as u32),
+            "{}: the stored picture's size",
+            scene.name
+        );
         let error = nv_flip::flip(
             nv_flip::FlipImageRgb8::with_data(w as u32, h as u32, reference.as_raw()),
             nv_flip::FlipImageRgb8::with_data(w as u32, h as u32, test.as_raw()),
@@ -530,14 +623,23 @@ fn the_preview_draws_its_golden_scenes() {
         );
         let mut pool = nv_flip::FlipPool::from_image(&error);
         let (mean, p99) = (pool.mean(), pool.get_percentile(0.99, false));
-        eprintln!("{}: FLIP mean {mean:.4} (bound {}), 99th percentile {p99:.4} (bound {})", scene.name, scene.mean, scene.p99);
+        eprintln!(
+            "{}: FLIP mean {mean:.4} (bound {}), 99th percentile {p99:.4} (bound {})",
+            scene.name, scene.mean, scene.p99
+        );
         if mean > scene.mean || p99 > scene.p99 {
             let dir = root().join("target/golden");
             std::fs::create_dir_all(&dir).unwrap();
             std::fs::copy(&drawn, dir.join(format!("{}-actual.png", scene.name))).unwrap();
             let map = error.apply_color_lut(&nv_flip::magma_lut());
-            image::RgbImage::from_raw(w as u32, h as u32, map.to_vec()).unwrap().save(dir.join(format!("{}-difference.png", scene.name))).unwrap();
-            failures.push(format!("{}: FLIP mean {mean} (bound {}), 99th percentile {p99} (bound {}); see target/golden/", scene.name, scene.mean, scene.p99));
+            image::RgbImage::from_raw(w as u32, h as u32, map.to_vec())
+                .unwrap()
+                .save(dir.join(format!("{}-difference.png", scene.name)))
+                .unwrap();
+            failures.push(format!(
+                "{}: FLIP mean {mean} (bound {}), 99th percentile {p99} (bound {}); see target/golden/",
+                scene.name, scene.mean, scene.p99
+            ));
         }
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
@@ -552,10 +654,11 @@ fn the_preview_draws_its_golden_scenes() {
 /// by far (the sun is in the picture).
 #[test]
 fn the_gpu_puts_a_sun_smaller_than_a_pixel_where_the_cpu_decoder_does() {
-    use sky::lut::decode::{mat_mul, pixel_directions};
+    use sky::colour::apply as mat_mul;
+    use sky::directions::camera::Camera;
+    use sky::lut::decode::pixel_directions;
     use sky::preview::frame::Frame;
     use sky::preview::sky_pass::sun_pixel;
-    use sky::render::camera::Camera;
     let luts = bake();
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
@@ -565,8 +668,10 @@ fn the_gpu_puts_a_sun_smaller_than_a_pixel_where_the_cpu_decoder_does() {
     let camera = Camera::Fisheye;
     let dirs = pixel_directions(&camera, w, h);
     for (e, az) in [(37.0, 20.0), (8.0, 200.0)] {
-        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.2, cloudiness: 0.0, sun_disk: true };
-        let point = sun_pixel(luts, &weather, &camera, w, h, &dirs).expect("a sun smaller than a pixel, within the image");
+        let weather =
+            Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.2, cloudiness: 0.0, sun_disk: true };
+        let point =
+            sun_pixel(luts, &weather, &camera, w, h, &dirs).expect("a sun smaller than a pixel, within the image");
         let mut frame = Frame::new(&gpu, &dirs).unwrap();
         pass.encode_with_sun_pixel(&gpu, &mut frame, luts, &weather, Some(point)).unwrap();
         let gpu_rgb = frame.finish().unwrap().rgb;
@@ -577,11 +682,21 @@ fn the_gpu_puts_a_sun_smaller_than_a_pixel_where_the_cpu_decoder_does() {
             let g = mat_mul(&m, gpu_rgb[i].map(f64::from));
             let spread = cpu_spread(luts, &weather, *d);
             for k in 0..3 {
-                let allowed = 1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
-                assert!((g[k] - cpu[i][k]).abs() <= allowed, "sun {e} up at {az}, pixel {i}, channel {k}: GPU {} against CPU {}", g[k], cpu[i][k]);
+                let allowed =
+                    1e-3 * cpu[i][k].abs() + 1e-6 * brightest + (0..3).map(|j| m[k][j].abs() * spread[j]).sum::<f64>();
+                assert!(
+                    (g[k] - cpu[i][k]).abs() <= allowed,
+                    "sun {e} up at {az}, pixel {i}, channel {k}: GPU {} against CPU {}",
+                    g[k],
+                    cpu[i][k]
+                );
             }
         }
         let sky_near = luts.sample_xyz(e, az, 0.2, 0.0, dirs[point.0].unwrap())[1];
-        assert!(cpu[point.0][1] > 10.0 * sky_near, "sun {e}: the sun's pixel {} against the sky's {sky_near}", cpu[point.0][1]);
+        assert!(
+            cpu[point.0][1] > 10.0 * sky_near,
+            "sun {e}: the sun's pixel {} against the sky's {sky_near}",
+            cpu[point.0][1]
+        );
     }
 }

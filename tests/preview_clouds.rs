@@ -68,7 +68,10 @@ fn the_noise_textures_tile_and_the_low_one_has_zero_mean() {
         for axis in 0..3 {
             let (inside, seam) = neighbour_differences(v, size, axis);
             eprintln!("{name}, axis {axis}: neighbours differ by {inside:.4} inside, {seam:.4} across the wrap");
-            assert!(seam < 1.5 * inside + 1e-3, "{name}-frequency noise does not tile along axis {axis}: {seam} across the wrap, {inside} inside");
+            assert!(
+                seam < 1.5 * inside + 1e-3,
+                "{name}-frequency noise does not tile along axis {axis}: {seam} across the wrap, {inside} inside"
+            );
         }
     }
     let again = CloudNoise::new(&gpu, 7).unwrap();
@@ -93,7 +96,8 @@ fn the_cloud_gbuffer_keeps_its_invariants() {
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     let mut clouds = Clouds::new(&gpu, &default_coverage(), 64, 1).unwrap();
     for (e, az) in [(40.0, 10.0), (3.0, 250.0), (-4.0, 90.0)] {
-        let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
+        let weather =
+            Weather { sun_elevation_deg: e, sun_azimuth_deg: az, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
         let mut cloudy_by_cover = Vec::new();
         for cover in [0.0, 0.3, 0.7] {
             let settings = CloudSettings { cover, samples: 1, steps: 32, ..CloudSettings::default() };
@@ -118,11 +122,17 @@ fn the_cloud_gbuffer_keeps_its_invariants() {
                 assert_eq!(cloudy, 0, "sun {e}: clouds with no cover");
             }
             if cover == 0.3 {
-                assert!(cloudy > 100 && clear > 100, "sun {e}, cover {cover}: {cloudy} cloudy and {clear} clear texels");
+                assert!(
+                    cloudy > 100 && clear > 100,
+                    "sun {e}, cover {cover}: {cloudy} cloudy and {clear} clear texels"
+                );
             }
             cloudy_by_cover.push(cloudy);
         }
-        assert!(cloudy_by_cover.windows(2).all(|w| w[0] < w[1]), "sun {e}: cloudy texels by cover 0, 0.3, 0.7: {cloudy_by_cover:?}");
+        assert!(
+            cloudy_by_cover.windows(2).all(|w| w[0] < w[1]),
+            "sun {e}: cloudy texels by cover 0, 0.3, 0.7: {cloudy_by_cover:?}"
+        );
     }
 }
 
@@ -151,11 +161,14 @@ fn the_amortised_gbuffer_spreads_its_work_and_converges() {
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     let n = 48;
     let mut clouds = Clouds::new(&gpu, &default_coverage(), n as u32, 1).unwrap();
-    let weather = Weather { sun_elevation_deg: 30.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
+    let weather =
+        Weather { sun_elevation_deg: 30.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false };
     let settings = CloudSettings { cover: 0.5, samples: 64, steps: 32, ..CloudSettings::default() };
     clouds.compute(&gpu, &weather, &settings, 1_000_000).unwrap();
     let reference = clouds.read_gbuffer(&gpu).unwrap();
-    let rms = |g: &[[f32; 4]], c: usize| (g.iter().zip(&reference).map(|(a, b)| ((a[c] - b[c]) as f64).powi(2)).sum::<f64>() / g.len() as f64).sqrt();
+    let rms = |g: &[[f32; 4]], c: usize| {
+        (g.iter().zip(&reference).map(|(a, b)| ((a[c] - b[c]) as f64).powi(2)).sum::<f64>() / g.len() as f64).sqrt()
+    };
     let settings = CloudSettings { samples: 16, ..settings };
     let schedule = Amortisation { frames_per_sample: 4, blend_frames: 8 };
     let mut previous: Option<[f64; 2]> = None;
@@ -167,8 +180,15 @@ fn the_amortised_gbuffer_spreads_its_work_and_converges() {
         }
         let (estimate, counts) = clouds.read_progress(&gpu, &settings).unwrap();
         let (low, high) = ((frame / 4) as f32, (frame / 4 + u32::from(frame % 4 != 0)) as f32);
-        assert!(counts.iter().all(|&c| c == low || c == high), "frame {frame}: marches per texel outside {low}..{high}");
-        assert_eq!(counts.iter().sum::<f32>(), (frame * 16 * 36) as f32, "frame {frame}: not 16 marches a tile a frame");
+        assert!(
+            counts.iter().all(|&c| c == low || c == high),
+            "frame {frame}: marches per texel outside {low}..{high}"
+        );
+        assert_eq!(
+            counts.iter().sum::<f32>(),
+            (frame * 16 * 36) as f32,
+            "frame {frame}: not 16 marches a tile a frame"
+        );
         if frame == 1 {
             for (i, &c) in counts.iter().enumerate() {
                 let (x, y) = (i % n, i / n);
@@ -177,7 +197,10 @@ fn the_amortised_gbuffer_spreads_its_work_and_converges() {
         }
         if [4, 16].contains(&frame) || frame == 63 {
             let now = [rms(&estimate, 0), rms(&estimate, 2)];
-            eprintln!("frame {frame}: RMS difference to 64 marches at once, opacity {:.4}, sun in-scatter {:.5}", now[0], now[1]);
+            eprintln!(
+                "frame {frame}: RMS difference to 64 marches at once, opacity {:.4}, sun in-scatter {:.5}",
+                now[0], now[1]
+            );
             if frame != 63 {
                 if let Some(p) = previous {
                     assert!(now[0] < 0.75 * p[0] && now[1] < 0.75 * p[1], "frame {frame}: {now:?} against {p:?}");

@@ -45,7 +45,12 @@ fn mie_single_spheres_match_miepython() {
         let q_ext = checks.get("qext_full_series").map(f).unwrap_or_else(|| f(&case["qext"]));
         let q_sca = checks.get("qsca_full_series").map(f).unwrap_or_else(|| f(&case["qsca"]));
         let label = format!("m={m} x={x}");
-        for (name, a, b) in [("qext", ours.q_ext, q_ext), ("qsca", ours.q_sca, q_sca), ("g", ours.g, f(&case["g"])), ("qback", ours.q_back, f(&case["qback"]))] {
+        for (name, a, b) in [
+            ("qext", ours.q_ext, q_ext),
+            ("qsca", ours.q_sca, q_sca),
+            ("g", ours.g, f(&case["g"])),
+            ("qback", ours.q_back, f(&case["qback"])),
+        ] {
             if name == "g" && x < 0.1 {
                 // g ~ x² for tiny spheres: compare absolutely.
                 assert!((a - b).abs() < 1e-8, "{label}: g {a} vs {b}");
@@ -88,9 +93,12 @@ fn mie_lognormal_matches_dense_miepython_integration() {
         let angles = arr(&case["angles_deg"]);
         let b = mie::bulk_optics(m, &mode, w, &angles);
         let label = format!("m={m} r={} sigma={} {w} nm", mode.median_radius_um, mode.sigma);
-        for (name, a, e) in
-            [("c_ext_um2", b.c_ext_um2, f(&case["c_ext_um2"])), ("c_sca_um2", b.c_sca_um2, f(&case["c_sca_um2"])), ("ssa", b.single_scattering_albedo(), f(&case["ssa"])), ("g", b.g, f(&case["g"]))]
-        {
+        for (name, a, e) in [
+            ("c_ext_um2", b.c_ext_um2, f(&case["c_ext_um2"])),
+            ("c_sca_um2", b.c_sca_um2, f(&case["c_sca_um2"])),
+            ("ssa", b.single_scattering_albedo(), f(&case["ssa"])),
+            ("g", b.g, f(&case["g"])),
+        ] {
             assert!(rel(a, e) < 2e-3, "{label}: {name} {a} vs {e} (rel {:.2e})", rel(a, e));
         }
         let p = arr(&case["phase_sr_inv"]);
@@ -119,11 +127,17 @@ fn mie_lognormal_matches_dense_miepython_integration() {
 fn us1976_matches_pyatmos() {
     let r = load("us1976.json");
     let z = arr(&r["altitude_km"]);
-    let (t, p, rho, n) = (arr(&r["temperature_k"]), arr(&r["pressure_pa"]), arr(&r["density_kg_m3"]), arr(&r["number_density_m3"]));
+    let (t, p, rho, n) =
+        (arr(&r["temperature_k"]), arr(&r["pressure_pa"]), arr(&r["density_kg_m3"]), arr(&r["number_density_m3"]));
     for i in 0..z.len() {
         let s = us1976::state(z[i]);
         let tol = if z[i] <= 40.0 { 2e-4 } else { 1e-3 };
-        for (name, a, b) in [("T", s.temperature_k, t[i]), ("P", s.pressure_pa, p[i]), ("rho", s.density_kg_m3, rho[i]), ("n", s.number_density_m3, n[i])] {
+        for (name, a, b) in [
+            ("T", s.temperature_k, t[i]),
+            ("P", s.pressure_pa, p[i]),
+            ("rho", s.density_kg_m3, rho[i]),
+            ("n", s.number_density_m3, n[i]),
+        ] {
             assert!(rel(a, b) < tol, "{} km: {name} {a} vs pyatmos {b} (rel {:.2e})", z[i], rel(a, b));
         }
     }
@@ -187,7 +201,11 @@ fn rayleigh_optical_depth_matches_bodhaine_and_bucholtz() {
     // Bucholtz 1995, eq. 9: τ = A λ^−(B + Cλ + D/λ), λ in µm.
     let bucholtz = |l_nm: f64| {
         let l = l_nm * 1e-3;
-        let (a, b, c, d) = if l < 0.5 { (6.50362e-3, 3.55212, 1.35579, 0.11563) } else { (8.64627e-3, 3.99668, 1.10298e-3, 2.71393e-2) };
+        let (a, b, c, d) = if l < 0.5 {
+            (6.50362e-3, 3.55212, 1.35579, 0.11563)
+        } else {
+            (8.64627e-3, 3.99668, 1.10298e-3, 2.71393e-2)
+        };
         a * l.powf(-(b + c * l + d / l))
     };
     for w in [400.0, 450.0, 500.0, 550.0, 600.0, 650.0, 700.0] {
@@ -196,7 +214,11 @@ fn rayleigh_optical_depth_matches_bodhaine_and_bucholtz() {
         assert!(rel(tau, bucholtz(w)) < 0.01, "{w} nm: {tau} vs Bucholtz {}", bucholtz(w));
     }
     let tau550 = optics::spectral_optics(&atm, 550.0, &cache).rayleigh_optical_depth;
-    eprintln!("Rayleigh optical depth at 550 nm: {tau550:.5} (Bodhaine eq. 30: {:.5}, Bucholtz: {:.5})", bodhaine(550.0), bucholtz(550.0));
+    eprintln!(
+        "Rayleigh optical depth at 550 nm: {tau550:.5} (Bodhaine eq. 30: {:.5}, Bucholtz: {:.5})",
+        bodhaine(550.0),
+        bucholtz(550.0)
+    );
 }
 
 /// Ozone column: the clear atmosphere asks for 345 DU.

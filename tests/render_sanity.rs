@@ -4,8 +4,8 @@
 
 use glam::DVec3;
 use sky::atmosphere::{optics, Atmosphere};
+use sky::directions::camera::{direction_deg, Camera};
 use sky::mie::MieCache;
-use sky::render::camera::{direction_deg, Camera};
 use sky::render::medium::Medium;
 use sky::render::rng::Rng;
 use sky::render::tracer::{Estimator, Tracer};
@@ -36,7 +36,8 @@ fn direct_beam_follows_beer_lambert() {
         let spec = medium.spectral(&atm, w, 1.0, 0.0, &cache);
         let tracer = Tracer::new(&medium, &spec, DVec3::Z, 0.533, Estimator::Full);
         let origin = tracer.observer(0.0);
-        let samples: Vec<f64> = (0..20_000).map(|k| tracer.transmittance(origin, DVec3::Z, &mut Rng::new(9, 0, k))).collect();
+        let samples: Vec<f64> =
+            (0..20_000).map(|k| tracer.transmittance(origin, DVec3::Z, &mut Rng::new(9, 0, k))).collect();
         let (t, se) = mean_se(&samples);
         let tau = optics::spectral_optics(&atm, w, &cache).total.optical_depth;
         let expect = (-tau).exp();
@@ -57,10 +58,14 @@ fn direct_beam_follows_beer_lambert() {
 #[test]
 fn energy_is_conserved_with_a_white_ground() {
     let thin = std::fs::read_to_string(root().join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap();
-    let thin = thin.replace("single_scattering_albedo = 0.9", "single_scattering_albedo = 1.0").replace("albedo = 0.3", "albedo = 1.0");
+    let thin = thin
+        .replace("single_scattering_albedo = 0.9", "single_scattering_albedo = 1.0")
+        .replace("albedo = 0.3", "albedo = 1.0");
     assert!(thin.contains("single_scattering_albedo = 1.0") && thin.contains("albedo = 1.0"));
     let cloud = std::fs::read_to_string(root().join("tests/atmospheres/disort_cloud_tau60.toml")).unwrap();
-    let cloud = cloud.replace("single_scattering_albedo = 0.99999", "single_scattering_albedo = 1.0").replace("albedo = 0.1 ", "albedo = 1.0 ");
+    let cloud = cloud
+        .replace("single_scattering_albedo = 0.99999", "single_scattering_albedo = 1.0")
+        .replace("albedo = 0.1 ", "albedo = 1.0 ");
     assert!(cloud.contains("single_scattering_albedo = 1.0") && cloud.contains("albedo = 1.0 "));
     for (text, n) in [(thin, 80_000u64), (cloud, 100_000)] {
         conserves_energy(&text, n);
@@ -112,7 +117,9 @@ fn ground_radiance(atm: &Atmosphere, view: (f64, f64), sun_zenith: f64, spp: u32
 /// black here.
 #[test]
 fn reciprocity_spot_checks() {
-    let text = std::fs::read_to_string(root().join("tests/atmospheres/disort_rayleigh_hg.toml")).unwrap().replace("albedo = 0.3", "albedo = 0.0");
+    let text = std::fs::read_to_string(root().join("tests/atmospheres/disort_rayleigh_hg.toml"))
+        .unwrap()
+        .replace("albedo = 0.3", "albedo = 0.0");
     let atm = Atmosphere::from_str(&root().join("tests/atmospheres/black.toml"), &text).unwrap();
     for (a, b, az) in [(30.0f64, 70.0f64, 90.0), (10.0, 50.0, 150.0)] {
         let (l1, s1) = ground_radiance(&atm, (a, az), b, 30_000, 11);
@@ -130,7 +137,12 @@ fn reciprocity_spot_checks() {
 fn renders_are_deterministic_across_threads_and_splits() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let settings = Settings {
-        spectral: SpectralSettings { spectral_nm: vec![500.0], xyz: true, band_nm: 47.0, wavelength_sampling: WavelengthSampling::Tristimulus },
+        spectral: SpectralSettings {
+            spectral_nm: vec![500.0],
+            xyz: true,
+            band_nm: 47.0,
+            wavelength_sampling: WavelengthSampling::Tristimulus,
+        },
         view: View {
             camera: Camera::Fisheye,
             width: 9,
@@ -184,7 +196,10 @@ fn column_table_matches_inspect_and_ratio_tracking() {
         let samples: Vec<f64> = (0..20_000).map(|k| tracer.transmittance(origin, d, &mut Rng::new(4, 0, k))).collect();
         let (t, se) = mean_se(&samples);
         let from_table = (-table.optical_depth(z_km, d.z, &spec.extinction)).exp();
-        assert!((t - from_table).abs() < 4.0 * se + 2e-3 * from_table, "z {z_km} km, zenith {zenith_deg}: tracked {t} ± {se}, table {from_table}");
+        assert!(
+            (t - from_table).abs() < 4.0 * se + 2e-3 * from_table,
+            "z {z_km} km, zenith {zenith_deg}: tracked {t} ± {se}, table {from_table}"
+        );
     }
 }
 
@@ -196,7 +211,12 @@ fn adaptive_sampling_meets_its_target() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let target = 0.08;
     let settings = Settings {
-        spectral: SpectralSettings { spectral_nm: vec![], xyz: true, band_nm: 47.0, wavelength_sampling: WavelengthSampling::Tristimulus },
+        spectral: SpectralSettings {
+            spectral_nm: vec![],
+            xyz: true,
+            band_nm: 47.0,
+            wavelength_sampling: WavelengthSampling::Tristimulus,
+        },
         view: View {
             camera: Camera::Fisheye,
             width: 10,
@@ -232,7 +252,10 @@ fn adaptive_sampling_meets_its_target() {
     rel.sort_by(f64::total_cmp);
     assert!(rel.len() > 20, "too few pixels stopped early");
     let median = rel[rel.len() / 2];
-    assert!((0.7 * target..=1.3 * target).contains(&median), "median relative standard error {median} against the target {target}");
+    assert!(
+        (0.7 * target..=1.3 * target).contains(&median),
+        "median relative standard error {median} against the target {target}"
+    );
     assert!(*rel.last().unwrap() < 3.0 * target, "a pixel far above the target: {}", rel.last().unwrap());
     let (lo, hi) = (lit.iter().map(|p| p.samples).min().unwrap(), lit.iter().map(|p| p.samples).max().unwrap());
     assert!(hi > 2 * lo, "samples should follow the noise: {lo}..{hi}");
@@ -248,7 +271,10 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
     // Daylight in an analytic atmosphere, and hazy twilight, where both
     // tracers estimate the sunlight scattered toward shadowed vertices
     // (`skylight_along`, written once for each).
-    let cases = [("analytic-hg", 65.0, vec![(0.0, 0.0), (50.0, 90.0), (80.0, 10.0), (95.0, 0.0)], 6000), ("hazed", 94.0, vec![(60.0, 0.0), (82.0, 0.0), (86.0, 90.0)], 3000)];
+    let cases = [
+        ("analytic-hg", 65.0, vec![(0.0, 0.0), (50.0, 90.0), (80.0, 10.0), (95.0, 0.0)], 6000),
+        ("hazed", 94.0, vec![(60.0, 0.0), (82.0, 0.0), (86.0, 90.0)], 3000),
+    ];
     let cache = MieCache::new(None);
     for (name, sun_zenith, dirs, spp) in cases {
         let atm = Atmosphere::load(&root().join(format!("atmospheres/{name}.toml"))).unwrap();
@@ -269,8 +295,18 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
         for (a, b) in hero.pixels.iter().zip(&single.pixels) {
             for c in 0..3 {
                 let se = (a.xyz_stderr[c].powi(2) + b.xyz_stderr[c].powi(2)).sqrt();
-                eprintln!("{name} channel {c}: hero {:.4e} ± {:.1e}, single {:.4e} ± {:.1e}", a.xyz[c], a.xyz_stderr[c], b.xyz[c], b.xyz_stderr[c]);
-                assert!((a.xyz[c] - b.xyz[c]).abs() < 4.0 * se, "{name} channel {c}: hero {} ± {} vs single {} ± {}", a.xyz[c], a.xyz_stderr[c], b.xyz[c], b.xyz_stderr[c]);
+                eprintln!(
+                    "{name} channel {c}: hero {:.4e} ± {:.1e}, single {:.4e} ± {:.1e}",
+                    a.xyz[c], a.xyz_stderr[c], b.xyz[c], b.xyz_stderr[c]
+                );
+                assert!(
+                    (a.xyz[c] - b.xyz[c]).abs() < 4.0 * se,
+                    "{name} channel {c}: hero {} ± {} vs single {} ± {}",
+                    a.xyz[c],
+                    a.xyz_stderr[c],
+                    b.xyz[c],
+                    b.xyz_stderr[c]
+                );
                 noise_hero += (a.xyz_stderr[c] / a.xyz[c]).powi(2);
                 noise_single += (b.xyz_stderr[c] / b.xyz[c]).powi(2);
             }
@@ -312,7 +348,8 @@ fn variance_reductions_are_unbiased() {
         let spec = medium.spectral(&atm, 550.0, 1.0, 0.1, &cache);
         let sun = direction_deg(sun_zenith, 0.0);
         let d = direction_deg(view.0, view.1);
-        let shipped = Tracer::new(&medium, &spec, sun, 0.533, Estimator::Full).with_sun_disk(false).with_columns(&table);
+        let shipped =
+            Tracer::new(&medium, &spec, sun, 0.533, Estimator::Full).with_sun_disk(false).with_columns(&table);
         assert!(shipped.lobe.is_some(), "{name}: the aerosols should be guided toward");
         let origin = shipped.observer(0.0);
         let guide = RayGuide::build(&shipped, origin, d);

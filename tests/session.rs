@@ -3,11 +3,12 @@
 //! to rendering each view directly.
 
 use sky::atmosphere::Atmosphere;
+use sky::directions::camera::Camera;
 use sky::farm::coordinator::{Options, WorkerSpec};
+use sky::farm::job::optics_hash;
 use sky::mie::MieCache;
-use sky::render::camera::Camera;
 use sky::render::{self, Settings};
-use sky::session::{optics_hash, OpticsCache, Session};
+use sky::session::{OpticsCache, Session};
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -24,7 +25,16 @@ fn a_session_prepares_optics_once_for_many_views() {
     let mie = MieCache::new(None);
     let cache = OpticsCache::default();
     let local = vec![WorkerSpec::Local { threads: 2 }];
-    let session = Session::new(atm.clone(), bundle.clone(), s.spectral.clone(), &cache, &mie, local.clone(), Options::default(), &|| {});
+    let session = Session::new(
+        atm.clone(),
+        bundle.clone(),
+        s.spectral.clone(),
+        &cache,
+        &mie,
+        local.clone(),
+        Options::default(),
+        &|| {},
+    );
     // Three views (sun zenith 20, 60, 85): the same optics, and each view
     // bit-identical to a direct render with those optics.
     for sun in [20.0, 60.0, 85.0] {
@@ -36,7 +46,16 @@ fn a_session_prepares_optics_once_for_many_views() {
     }
     // A second session of the same atmosphere and spectral setting prepares
     // nothing; another spectral setting does.
-    let again = Session::new(atm.clone(), bundle.clone(), s.spectral.clone(), &cache, &mie, local.clone(), Options::default(), &|| {});
+    let again = Session::new(
+        atm.clone(),
+        bundle.clone(),
+        s.spectral.clone(),
+        &cache,
+        &mie,
+        local.clone(),
+        Options::default(),
+        &|| {},
+    );
     assert!(Arc::ptr_eq(&again.scene, &session.scene));
     assert_eq!(cache.prepared(), 1);
     let mut other = s.spectral.clone();
@@ -50,7 +69,7 @@ fn a_session_prepares_optics_once_for_many_views() {
 /// 1 sent them with the first task of every view, so a bake-shaped run (64
 /// views of one atmosphere) sent 64 copies to each worker; protocol 2 sends
 /// the optics once (tests/farm.rs counts it). A figure for the farm's issue
-/// (`cargo test --release --test session -- --ignored --nocapture`).
+/// (`cargo test --release --test suite -- session:: --ignored --nocapture`).
 #[test]
 #[ignore = "a measurement: prints the bytes of one view's job for the shipped clear sky"]
 fn job_bytes_per_view() {
@@ -62,7 +81,16 @@ fn job_bytes_per_view() {
     s.spectral.wavelength_sampling = render::WavelengthSampling::Hero;
     s.view.camera = Camera::Equirect;
     (s.view.width, s.view.height) = (32, 128);
-    let session = Session::new(atm, bundle, s.spectral.clone(), &OpticsCache::default(), &MieCache::new(None), vec![], Options::default(), &|| {});
+    let session = Session::new(
+        atm,
+        bundle,
+        s.spectral.clone(),
+        &OpticsCache::default(),
+        &MieCache::new(None),
+        vec![],
+        Options::default(),
+        &|| {},
+    );
     let job = session.job(&s.view);
     let optics = job.optics.message();
     let bytes = optics.encoded_len() + job.view_json.len();

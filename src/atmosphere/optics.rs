@@ -53,10 +53,16 @@ pub fn rayleigh_depolarization(air: &Air, wavelength_nm: f64) -> f64 {
 
 /// Per-particle Mie optics of a Mie aerosol at a wavelength (modes mixed),
 /// with the phase function at `angles_deg` (may be empty).
-pub fn mie_particle_optics(aerosol: &Aerosol, wavelength_nm: f64, angles_deg: &[f64], cache: &MieCache) -> Option<BulkOptics> {
+pub fn mie_particle_optics(
+    aerosol: &Aerosol,
+    wavelength_nm: f64,
+    angles_deg: &[f64],
+    cache: &MieCache,
+) -> Option<BulkOptics> {
     let AerosolOptics::Mie { refractive_index, modes } = &aerosol.optics else { return None };
     let m = refractive_index.at(wavelength_nm);
-    let parts: Vec<(f64, BulkOptics)> = modes.iter().map(|(w, mode)| (*w, cache.bulk_optics(m, mode, wavelength_nm, angles_deg))).collect();
+    let parts: Vec<(f64, BulkOptics)> =
+        modes.iter().map(|(w, mode)| (*w, cache.bulk_optics(m, mode, wavelength_nm, angles_deg))).collect();
     Some(lognormal::mix(&parts))
 }
 
@@ -74,10 +80,16 @@ pub fn aerosol_scale(atm: &Atmosphere, aerosol: &Aerosol, wavelength_nm: f64, ca
     let column_m = atm.profiles[aerosol.profile].column_km(atm.planet.top_km) * 1000.0;
     match &aerosol.optics {
         AerosolOptics::Analytic { g, single_scattering_albedo, angstrom_exponent, .. } => {
-            let Amount::OpticalDepth { optical_depth, wavelength_nm: l0 } = aerosol.amount else { unreachable!("validated: analytic aerosols are normalised by optical depth") };
+            let Amount::OpticalDepth { optical_depth, wavelength_nm: l0 } = aerosol.amount else {
+                unreachable!("validated: analytic aerosols are normalised by optical depth")
+            };
             // Ångström's law: τ(λ) = τ(λ0) (λ/λ0)^−α.
             let tau = optical_depth * (wavelength_nm / l0).powf(-angstrom_exponent);
-            AerosolScale { extinction_per_density_m: tau / column_m, single_scattering_albedo: *single_scattering_albedo, g: *g }
+            AerosolScale {
+                extinction_per_density_m: tau / column_m,
+                single_scattering_albedo: *single_scattering_albedo,
+                g: *g,
+            }
         }
         AerosolOptics::Mie { .. } => {
             let b = mie_particle_optics(aerosol, wavelength_nm, &[], cache).unwrap();
@@ -86,11 +98,19 @@ pub fn aerosol_scale(atm: &Atmosphere, aerosol: &Aerosol, wavelength_nm: f64, ca
                 Amount::NumberDensityM3(n) => n,
                 Amount::Profile => 1.0,
                 Amount::OpticalDepth { optical_depth, wavelength_nm: l0 } => {
-                    let b0 = if l0 == wavelength_nm { b.clone() } else { mie_particle_optics(aerosol, l0, &[], cache).unwrap() };
+                    let b0 = if l0 == wavelength_nm {
+                        b.clone()
+                    } else {
+                        mie_particle_optics(aerosol, l0, &[], cache).unwrap()
+                    };
                     optical_depth / (b0.c_ext_um2 * 1e-12 * column_m)
                 }
             };
-            AerosolScale { extinction_per_density_m: number_scale * c_ext_m2, single_scattering_albedo: b.single_scattering_albedo(), g: b.g }
+            AerosolScale {
+                extinction_per_density_m: number_scale * c_ext_m2,
+                single_scattering_albedo: b.single_scattering_albedo(),
+                g: b.g,
+            }
         }
     }
 }
@@ -145,7 +165,14 @@ pub fn spectral_optics(atm: &Atmosphere, wavelength_nm: f64, cache: &MieCache) -
         let s = aerosol_scale(atm, a, wavelength_nm, cache);
         let tau = s.extinction_per_density_m * p.column_km(top) * 1000.0;
         aerosol_tau += tau;
-        push(&a.name, "aerosol", tau, tau * s.single_scattering_albedo, s.g, s.extinction_per_density_m * p.density(0.0) * 1000.0);
+        push(
+            &a.name,
+            "aerosol",
+            tau,
+            tau * s.single_scattering_albedo,
+            s.g,
+            s.extinction_per_density_m * p.density(0.0) * 1000.0,
+        );
     }
     let tau: f64 = components.iter().map(|c| c.optical_depth).sum();
     let tau_sca: f64 = components.iter().map(|c| c.scattering_optical_depth).sum();
@@ -161,5 +188,12 @@ pub fn spectral_optics(atm: &Atmosphere, wavelength_nm: f64, cache: &MieCache) -
         asymmetry: if tau_sca > 0.0 { g_w / tau_sca } else { 0.0 },
         extinction_ground_per_km: ext0,
     };
-    SpectralOptics { wavelength_nm, rayleigh_optical_depth: rayleigh_tau, absorber_optical_depth: absorber_tau, aerosol_optical_depth: aerosol_tau, components, total }
+    SpectralOptics {
+        wavelength_nm,
+        rayleigh_optical_depth: rayleigh_tau,
+        absorber_optical_depth: absorber_tau,
+        aerosol_optical_depth: aerosol_tau,
+        components,
+        total,
+    }
 }

@@ -120,7 +120,16 @@ mod tests {
 
     #[test]
     fn exponential_column_is_analytic() {
-        let p = Profile { name: "e".into(), shape: ProfileShape::Exponential { scale_height_km: 8.0, base_km: 0.0, min_km: f64::NEG_INFINITY, max_km: f64::INFINITY }, units: DensityUnits::Relative };
+        let p = Profile {
+            name: "e".into(),
+            shape: ProfileShape::Exponential {
+                scale_height_km: 8.0,
+                base_km: 0.0,
+                min_km: f64::NEG_INFINITY,
+                max_km: f64::INFINITY,
+            },
+            units: DensityUnits::Relative,
+        };
         let c = p.column_km(100.0);
         let exact = 8.0 * (1.0 - (-100.0f64 / 8.0).exp());
         assert!((c / exact - 1.0).abs() < 1e-7, "{c} {exact}");
@@ -128,7 +137,15 @@ mod tests {
 
     #[test]
     fn table_log_interpolation_and_edges() {
-        let p = Profile { name: "t".into(), shape: ProfileShape::Table { altitude_km: vec![1.0, 2.0], density: vec![1.0, 0.01], interpolation: Interpolation::Log }, units: DensityUnits::Relative };
+        let p = Profile {
+            name: "t".into(),
+            shape: ProfileShape::Table {
+                altitude_km: vec![1.0, 2.0],
+                density: vec![1.0, 0.01],
+                interpolation: Interpolation::Log,
+            },
+            units: DensityUnits::Relative,
+        };
         assert!((p.density(1.5) - 0.1).abs() < 1e-12);
         assert_eq!(p.density(0.5), 0.0);
         assert_eq!(p.density(2.5), 0.0);

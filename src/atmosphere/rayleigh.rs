@@ -50,14 +50,16 @@ pub fn cross_section_bodhaine_cm2(wavelength_nm: f64) -> f64 {
     let l_cm = wavelength_nm * 1e-7;
     let n = 1.0 + refractivity(l_um, CO2_PPV);
     let n2 = n * n;
-    24.0 * PI.powi(3) * (n2 - 1.0).powi(2) / (l_cm.powi(4) * N_S_CM3 * N_S_CM3 * (n2 + 2.0).powi(2)) * king_factor_air(l_um, CO2_PPV)
+    24.0 * PI.powi(3) * (n2 - 1.0).powi(2) / (l_cm.powi(4) * N_S_CM3 * N_S_CM3 * (n2 + 2.0).powi(2))
+        * king_factor_air(l_um, CO2_PPV)
 }
 
 /// Rayleigh cross-section per molecule, cm², Bucholtz 1995 eq. 8 with the
 /// Table 3 coefficients: σ = A λ^−(B + Cλ + D/λ), λ in µm.
 pub fn cross_section_bucholtz_cm2(wavelength_nm: f64) -> f64 {
     let l = wavelength_nm * 1e-3;
-    let (a, b, c, d) = if l < 0.5 { (3.01577e-28, 3.55212, 1.35579, 0.11563) } else { (4.01061e-28, 3.99668, 1.10298e-3, 2.71393e-2) };
+    let (a, b, c, d) =
+        if l < 0.5 { (3.01577e-28, 3.55212, 1.35579, 0.11563) } else { (4.01061e-28, 3.99668, 1.10298e-3, 2.71393e-2) };
     a * l.powf(-(b + c * l + d / l))
 }
 

@@ -21,10 +21,14 @@ pub const P0_PA: f64 = 101_325.0;
 
 /// Layer bases: geopotential altitude (km'), molecular-scale temperature
 /// lapse rate (K / km') — Table 4 of the standard.
-const LAYERS: [(f64, f64); 8] = [(0.0, -6.5), (11.0, 0.0), (20.0, 1.0), (32.0, 2.8), (47.0, 0.0), (51.0, -2.8), (71.0, -2.0), (84.852, 0.0)];
+const LAYERS: [(f64, f64); 8] =
+    [(0.0, -6.5), (11.0, 0.0), (20.0, 1.0), (32.0, 2.8), (47.0, 0.0), (51.0, -2.8), (71.0, -2.0), (84.852, 0.0)];
 
 /// M/M0 from 80 to 86 km geometric altitude every 0.5 km (Table 8).
-const M_RATIO: [f64; 13] = [1.000000, 0.999996, 0.999989, 0.999971, 0.999941, 0.999909, 0.999870, 0.999829, 0.999786, 0.999741, 0.999694, 0.999641, 0.999579];
+const M_RATIO: [f64; 13] = [
+    1.000000, 0.999996, 0.999989, 0.999971, 0.999941, 0.999909, 0.999870, 0.999829, 0.999786, 0.999741, 0.999694,
+    0.999641, 0.999579,
+];
 
 /// The state of the air at one altitude.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -44,7 +48,8 @@ struct LayerBase {
 }
 
 fn layer_bases() -> [LayerBase; 8] {
-    let mut out: [LayerBase; 8] = std::array::from_fn(|i| LayerBase { h_km: LAYERS[i].0, t_m: 0.0, lapse: LAYERS[i].1, p: 0.0 });
+    let mut out: [LayerBase; 8] =
+        std::array::from_fn(|i| LayerBase { h_km: LAYERS[i].0, t_m: 0.0, lapse: LAYERS[i].1, p: 0.0 });
     out[0].t_m = 288.15;
     out[0].p = P0_PA;
     for i in 1..8 {
@@ -60,7 +65,11 @@ fn molecular_temp_pressure(base: &LayerBase, h_km: f64) -> (f64, f64) {
     let dh_m = (h_km - base.h_km) * 1000.0;
     let lapse_per_m = base.lapse / 1000.0;
     let t = base.t_m + lapse_per_m * dh_m;
-    let p = if base.lapse == 0.0 { base.p * (-G0 * M0 * dh_m / (R_STAR * base.t_m)).exp() } else { base.p * (base.t_m / t).powf(G0 * M0 / (R_STAR * lapse_per_m)) };
+    let p = if base.lapse == 0.0 {
+        base.p * (-G0 * M0 * dh_m / (R_STAR * base.t_m)).exp()
+    } else {
+        base.p * (base.t_m / t).powf(G0 * M0 / (R_STAR * lapse_per_m))
+    };
     (t, p)
 }
 

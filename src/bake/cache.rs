@@ -80,7 +80,8 @@ impl SliceCache {
         let bytes = std::fs::read(self.path(key)).ok()?;
         let body = bytes.strip_prefix(MAGIC.as_slice())?;
         let s: RenderedSlice = postcard::from_bytes(body).ok()?;
-        (s.xyz.len() == s.width * s.height && s.xyz_stderr.len() == s.xyz.len() && s.samples.len() == s.xyz.len()).then_some(s)
+        (s.xyz.len() == s.width * s.height && s.xyz_stderr.len() == s.xyz.len() && s.samples.len() == s.xyz.len())
+            .then_some(s)
     }
 
     /// Stores a slice under `key`: written to a temporary file, then renamed.
@@ -141,14 +142,26 @@ mod tests {
     use super::*;
 
     fn slice() -> RenderedSlice {
-        RenderedSlice { width: 2, height: 1, sun_zenith_deg: 30.0, xyz: vec![[1.0, 2.0, 3.0], [0.1, 0.2, 0.3]], xyz_stderr: vec![[0.0; 3]; 2], samples: vec![8, 8], core_seconds: 0.5 }
+        RenderedSlice {
+            width: 2,
+            height: 1,
+            sun_zenith_deg: 30.0,
+            xyz: vec![[1.0, 2.0, 3.0], [0.1, 0.2, 0.3]],
+            xyz_stderr: vec![[0.0; 3]; 2],
+            samples: vec![8, 8],
+            core_seconds: 0.5,
+        }
     }
 
     /// The key names the renderer's source (build.rs), not only the version.
     #[test]
     fn the_key_names_the_renderers_source() {
-        assert!(crate::RENDER_SOURCE.len() == 32 && crate::RENDER_SOURCE.bytes().all(|b| b.is_ascii_hexdigit()), "{}", crate::RENDER_SOURCE);
-        assert!(crate::farm::build_version().contains(&crate::RENDER_SOURCE[..12]));
+        assert!(
+            crate::RENDER_SOURCE.len() == 32 && crate::RENDER_SOURCE.bytes().all(|b| b.is_ascii_hexdigit()),
+            "{}",
+            crate::RENDER_SOURCE
+        );
+        assert!(crate::session::farm::build_version().contains(&crate::RENDER_SOURCE[..12]));
     }
 
     #[test]

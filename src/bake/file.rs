@@ -34,7 +34,7 @@
 //! ```
 
 use crate::atmosphere::Located;
-use crate::lut::mapping;
+use crate::directions::mapping;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -129,7 +129,11 @@ pub const DEFAULT_FOG_CEILING_KM: f64 = 3.0;
 impl Default for FogSettings {
     /// The talk's 32 × 32 under the cloudy skies' cloud base.
     fn default() -> FogSettings {
-        FogSettings { ceiling_km: DEFAULT_FOG_CEILING_KM, width: crate::lut::fog::FOG_WIDTH, height: crate::lut::fog::FOG_HEIGHT }
+        FogSettings {
+            ceiling_km: DEFAULT_FOG_CEILING_KM,
+            width: crate::lut::fog::FOG_WIDTH,
+            height: crate::lut::fog::FOG_HEIGHT,
+        }
     }
 }
 
@@ -196,7 +200,9 @@ struct RawSky {
 pub fn default_sampling(q: Quality) -> Sampling {
     match q {
         Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None },
-        Quality::Final => Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None, fog_ms_size: None },
+        Quality::Final => {
+            Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None, fog_ms_size: None }
+        }
     }
 }
 
@@ -236,7 +242,8 @@ impl Ctx<'_> {
         if let Some(n) = &raw.spp {
             match u32::try_from(*n.get_ref()) {
                 Ok(v) if v >= 1 => s.spp = v,
-                _ => self.err(n, format!("{what}.spp: must be a whole number from 1 to {}, got {}", u32::MAX, n.get_ref())),
+                _ => self
+                    .err(n, format!("{what}.spp: must be a whole number from 1 to {}, got {}", u32::MAX, n.get_ref())),
             }
         }
         if let Some(e) = &raw.max_rel_error {
@@ -244,19 +251,34 @@ impl Ctx<'_> {
             if e_v > 0.0 && e_v < 1.0 {
                 s.max_rel_error = Some(e_v);
             } else {
-                self.err(e, format!("{what}.max_rel_error: must be between 0 and 1 (a fraction, e.g. 0.01), got {e_v}"));
+                self.err(
+                    e,
+                    format!("{what}.max_rel_error: must be between 0 and 1 (a fraction, e.g. 0.01), got {e_v}"),
+                );
             }
         }
         if let Some(g) = &raw.ms_grid {
             match parse_grid(g.get_ref()) {
                 Some(grid) => s.ms_grid = Some(grid),
-                None => self.err(g, format!("{what}.ms_grid: expected \"ROWSxCOLUMNS\", each from 2 to 1024 (e.g. \"16x13\"), got {:?}", g.get_ref())),
+                None => self.err(
+                    g,
+                    format!(
+                        "{what}.ms_grid: expected \"ROWSxCOLUMNS\", each from 2 to 1024 (e.g. \"16x13\"), got {:?}",
+                        g.get_ref()
+                    ),
+                ),
             }
         }
         if let Some(g) = &raw.fog_ms_size {
             match parse_grid(g.get_ref()) {
                 Some(size) => s.fog_ms_size = Some(size),
-                None => self.err(g, format!("{what}.fog_ms_size: expected \"WIDTHxHEIGHT\", each from 2 to 1024 (e.g. \"16x16\"), got {:?}", g.get_ref())),
+                None => self.err(
+                    g,
+                    format!(
+                        "{what}.fog_ms_size: expected \"WIDTHxHEIGHT\", each from 2 to 1024 (e.g. \"16x16\"), got {:?}",
+                        g.get_ref()
+                    ),
+                ),
             }
         }
         s
@@ -291,10 +313,18 @@ fn positive_size(ctx: &mut Ctx, v: &S<i64>, key: &str, sky: &str) -> usize {
 
 impl BakeFile {
     pub fn load(path: &Path) -> Result<BakeFile, BakeFileError> {
-        let text = std::fs::read(path).map_err(|e| BakeFileError { errors: vec![Located { path: path.to_path_buf(), line: None, message: format!("cannot read the bake file: {e}") }] })?;
+        let text = std::fs::read(path).map_err(|e| BakeFileError {
+            errors: vec![Located {
+                path: path.to_path_buf(),
+                line: None,
+                message: format!("cannot read the bake file: {e}"),
+            }],
+        })?;
         let text = String::from_utf8(text).map_err(|e| {
             let line = e.as_bytes()[..e.utf8_error().valid_up_to()].iter().filter(|&&b| b == b'\n').count() + 1;
-            BakeFileError { errors: vec![Located { path: path.to_path_buf(), line: Some(line), message: "not UTF-8 text".into() }] }
+            BakeFileError {
+                errors: vec![Located { path: path.to_path_buf(), line: Some(line), message: "not UTF-8 text".into() }],
+            }
         })?;
         BakeFile::parse(path, &text)
     }
@@ -304,7 +334,9 @@ impl BakeFile {
     pub fn parse(path: &Path, text: &str) -> Result<BakeFile, BakeFileError> {
         let raw: RawFile = toml::from_str(text).map_err(|e| {
             let line = e.span().map(|s| text[..s.start.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1);
-            BakeFileError { errors: vec![Located { path: path.to_path_buf(), line, message: e.message().trim().to_string() }] }
+            BakeFileError {
+                errors: vec![Located { path: path.to_path_buf(), line, message: e.message().trim().to_string() }],
+            }
         })?;
         let mut ctx = Ctx { path, text, errors: Vec::new() };
         let defaults = [default_sampling(Quality::Draft), default_sampling(Quality::Final)];
@@ -312,7 +344,11 @@ impl BakeFile {
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let mut skies: Vec<BasisSky> = Vec::new();
         if raw.sky.is_empty() {
-            ctx.errors.push(Located { path: path.to_path_buf(), line: None, message: "no [[sky]] tables: a bake needs at least one basis sky".into() });
+            ctx.errors.push(Located {
+                path: path.to_path_buf(),
+                line: None,
+                message: "no [[sky]] tables: a bake needs at least one basis sky".into(),
+            });
         }
         for s in &raw.sky {
             let r = s.get_ref();
@@ -358,13 +394,30 @@ impl BakeFile {
                 None => mapping::default_threshold_deg(width.max(1), height.max(1)),
                 Some(t) if (0.0..=90.0).contains(t.get_ref()) => *t.get_ref(),
                 Some(t) => {
-                    ctx.err(t, format!("sky {name:?}: threshold_deg must be a sun zenith angle from 0 to 90 degrees, got {}", t.get_ref()));
+                    ctx.err(
+                        t,
+                        format!(
+                            "sky {name:?}: threshold_deg must be a sun zenith angle from 0 to 90 degrees, got {}",
+                            t.get_ref()
+                        ),
+                    );
                     90.0
                 }
             };
             let [draft, final_] = ctx.presets([&global[0], &global[1]], &r.quality, &format!("sky {name:?}: "));
             let line = ctx.line(s.span().start);
-            skies.push(BasisSky { name, atmosphere, width, height, slices, altitude_m, threshold_deg, line, draft, final_ });
+            skies.push(BasisSky {
+                name,
+                atmosphere,
+                width,
+                height,
+                slices,
+                altitude_m,
+                threshold_deg,
+                line,
+                draft,
+                final_,
+            });
         }
         let mut fog = FogSettings::default();
         if let Some(f) = &raw.fog {
@@ -409,7 +462,10 @@ mod tests {
         let s = &b.skies[0];
         assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
         assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None });
-        assert_eq!(s.final_, Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None, fog_ms_size: None });
+        assert_eq!(
+            s.final_,
+            Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None, fog_ms_size: None }
+        );
         assert_eq!(b.fog, FogSettings { ceiling_km: 3.0, width: 32, height: 32 });
         let b = parse("[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[fog]\nceiling_km = 2.5\nwidth = 8\nheight = 4\n").unwrap();
         assert_eq!(b.fog, FogSettings { ceiling_km: 2.5, width: 8, height: 4 });
@@ -422,7 +478,11 @@ mod tests {
     fn a_bad_grid_is_named_with_its_line() {
         for bad in ["16", "1x13", "16x0", "ax3", "2000x4"] {
             let e = parse(&format!("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n[sky.quality.draft]\nms_grid = \"{bad}\"\n")).unwrap_err();
-            assert!(e.to_string().contains("test-bake.toml:7: ") && e.to_string().contains("ms_grid: expected \"ROWSxCOLUMNS\""), "{bad}: {e}");
+            assert!(
+                e.to_string().contains("test-bake.toml:7: ")
+                    && e.to_string().contains("ms_grid: expected \"ROWSxCOLUMNS\""),
+                "{bad}: {e}"
+            );
         }
         assert_eq!(parse_grid(" 8 x 5 "), Some([8, 5]));
     }
@@ -432,23 +492,31 @@ mod tests {
         let text = "[[sky]]\nname = \"clear\"\natmosphere = \"nope.toml\"\nwidth = 0\nheight = 128\nslices = 32\n[sky.quality.final]\nmax_rel_error = 2.0\n[sky.quality.best]\nspp = 1\n";
         let e = parse(text).unwrap_err();
         let lines: Vec<String> = e.errors.iter().map(|l| l.to_string()).collect();
-        let has = |line: usize, what: &str| lines.iter().any(|l| l.contains(&format!("test-bake.toml:{line}: ")) && l.contains(what));
+        let has = |line: usize, what: &str| {
+            lines.iter().any(|l| l.contains(&format!("test-bake.toml:{line}: ")) && l.contains(what))
+        };
         assert!(has(3, "nope.toml not found"), "{lines:?}");
         assert!(has(4, "width must be"), "{lines:?}");
         assert!(has(6, "slices must be 64"), "{lines:?}");
         assert!(has(8, "max_rel_error"), "{lines:?}");
         assert!(has(9, "quality.best: unknown preset"), "{lines:?}");
         assert_eq!(lines.len(), 5, "{lines:?}");
-        let unknown = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\ncolour = 3\n").unwrap_err();
+        let unknown = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\ncolour = 3\n")
+            .unwrap_err();
         assert!(unknown.to_string().contains("test-bake.toml:6: unknown field `colour`"), "{unknown}");
         let twice = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\n").unwrap_err();
         assert!(twice.to_string().contains("test-bake.toml:7: sky \"a\" appears twice"), "{twice}");
-        let threshold = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\nthreshold_deg = 95.0\n").unwrap_err();
+        let threshold =
+            parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\nthreshold_deg = 95.0\n")
+                .unwrap_err();
         assert!(threshold.to_string().contains("test-bake.toml:6: sky \"a\": threshold_deg must be"), "{threshold}");
         let fog = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\naltitude_m = 500.0\n[fog]\nceiling_km = 0.2\nheight = 0\nshape = 1\n").unwrap_err();
         assert!(fog.to_string().contains("test-bake.toml:10: unknown field `shape`"), "{fog}");
         let fog = parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 1\nheight = 1\naltitude_m = 500.0\n[fog]\nceiling_km = 0.2\nheight = 0\n").unwrap_err();
-        assert!(fog.to_string().contains("test-bake.toml:8: fog.ceiling_km: must be above every sky's observer (0.5 km)"), "{fog}");
+        assert!(
+            fog.to_string().contains("test-bake.toml:8: fog.ceiling_km: must be above every sky's observer (0.5 km)"),
+            "{fog}"
+        );
         assert!(fog.to_string().contains("test-bake.toml:9: fog.height: must be from 2"), "{fog}");
         let b =
             parse("[[sky]]\nname = \"a\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\nthreshold_deg = 85.3\n[[sky]]\nname = \"b\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n")
@@ -469,10 +537,20 @@ mod tests {
             // Multiple scattering on a grid of its own for the sunny skies'
             // final bake only (README: measured against whole slices).
             let grid = if s.name.starts_with("cloudy") { None } else { Some([16, 13]) };
-            assert_eq!((s.sampling(Quality::Final).ms_grid, s.sampling(Quality::Draft).ms_grid), (grid, None), "{}", s.name);
+            assert_eq!(
+                (s.sampling(Quality::Final).ms_grid, s.sampling(Quality::Draft).ms_grid),
+                (grid, None),
+                "{}",
+                s.name
+            );
             // And their Shadowed Fog at 16 x 16 (README: measured against whole fog slices).
             let fog = if s.name.starts_with("cloudy") { None } else { Some([16, 16]) };
-            assert_eq!((s.sampling(Quality::Final).fog_ms_size, s.sampling(Quality::Draft).fog_ms_size), (fog, None), "{}", s.name);
+            assert_eq!(
+                (s.sampling(Quality::Final).fog_ms_size, s.sampling(Quality::Draft).fog_ms_size),
+                (fog, None),
+                "{}",
+                s.name
+            );
         }
         // And the other shipped bakes parse.
         for f in ["bakes/demo.toml", "bakes/tiny.toml", "bakes/cost-probe.toml", "tests/bakes/tiny.toml"] {

@@ -18,9 +18,9 @@ use super::file::{BasisSky, FogSettings, Quality, Sampling};
 use super::run::{slice_of_image, BAKE_SEED};
 use super::BakeError;
 use crate::atmosphere::Atmosphere;
+use crate::bake::fog_falloff::{study, ErrorSummary};
+use crate::directions::mapping;
 use crate::lut::fog::{fog_texel_view, AttenuationTable, Falloff, FogGeometry};
-use crate::lut::fog_falloff::{study, ErrorSummary};
-use crate::lut::mapping;
 use crate::render::fog::Fog;
 use crate::render::{Scene, SpectralSettings, View};
 use serde::{Deserialize, Serialize};
@@ -70,7 +70,15 @@ pub struct SkyFog {
 /// The view of fog slice `index` of `sky` (the Shadowed Fog's if
 /// `shadowed`): the Fog LUT's texel directions, the slice's sun, the fog
 /// to the ceiling.
-pub fn fog_view(sky: &BasisSky, fog: &FogSettings, s: &Sampling, index: usize, radius_km: f64, top_km: f64, shadowed: bool) -> View {
+pub fn fog_view(
+    sky: &BasisSky,
+    fog: &FogSettings,
+    s: &Sampling,
+    index: usize,
+    radius_km: f64,
+    top_km: f64,
+    shadowed: bool,
+) -> View {
     let sun_zenith_deg = mapping::slice_sun_zenith_deg(index, radius_km, top_km);
     View { max_rel_error: s.max_rel_error, ..fog_view_at(sky, fog, s.spp, sun_zenith_deg, shadowed) }
 }
@@ -89,7 +97,12 @@ pub fn fog_view_at(sky: &BasisSky, fog: &FogSettings, spp: u32, sun_zenith_deg: 
         .collect();
     let fog = Fog { max_distance_km: f64::INFINITY, ceiling_km: Some(fog.ceiling_km), shadowed };
     // A w x h grid of directions (the camera reads pixel y * w + x).
-    View { width: w, height: h, fog: Some(fog), ..View::directions(dirs, sun_zenith_deg, sky.altitude_m, spp, BAKE_SEED) }
+    View {
+        width: w,
+        height: h,
+        fog: Some(fog),
+        ..View::directions(dirs, sun_zenith_deg, sky.altitude_m, spp, BAKE_SEED)
+    }
 }
 
 /// The view of fog slice `index`'s render (its Shadowed Fog) and its cache key.
@@ -134,7 +147,17 @@ pub struct FogTodo {
 pub fn to_render(sky: &super::SkySlices, fog: &FogSettings, cache: &SliceCache, quality: Quality) -> Vec<FogTodo> {
     let mut todo: Vec<FogTodo> = Vec::new();
     for index in 0..sky.sky.slices {
-        let (view, key) = shadowed_view_and_key(&sky.sky, fog, &sky.sampling, index, sky.radius_km, sky.top_km, &sky.atmosphere_hash, &sky.spectral, quality);
+        let (view, key) = shadowed_view_and_key(
+            &sky.sky,
+            fog,
+            &sky.sampling,
+            index,
+            sky.radius_km,
+            sky.top_km,
+            &sky.atmosphere_hash,
+            &sky.spectral,
+            quality,
+        );
         if !todo.iter().any(|t| t.key == key) && cache.get(&key).is_none() {
             todo.push(FogTodo { index, view, key });
         }
@@ -192,8 +215,21 @@ pub fn bake_fog(
     let (sky, atm, scene) = (job.sky, job.atmosphere, job.scene);
     let spectral = &scene.spectral;
     let (radius_km, top_km) = (atm.planet.radius_km, atm.planet.top_km);
-    let geometry = FogGeometry { planet_radius_km: radius_km, observer_altitude_km: sky.altitude_m / 1000.0, ceiling_km: job.settings.ceiling_km };
-    let mut fog = SkyFog { settings: job.settings, geometry, lit: Vec::new(), shadowed: Vec::new(), extras: extras(job, geometry, cache, cancel)?, rendered: 0, cached: 0, core_seconds: 0.0 };
+    let geometry = FogGeometry {
+        planet_radius_km: radius_km,
+        observer_altitude_km: sky.altitude_m / 1000.0,
+        ceiling_km: job.settings.ceiling_km,
+    };
+    let mut fog = SkyFog {
+        settings: job.settings,
+        geometry,
+        lit: Vec::new(),
+        shadowed: Vec::new(),
+        extras: extras(job, geometry, cache, cancel)?,
+        rendered: 0,
+        cached: 0,
+        core_seconds: 0.0,
+    };
     let total = sky.slices;
     for index in 0..sky.slices {
         if cancel.load(Ordering::SeqCst) {
@@ -201,7 +237,17 @@ pub fn bake_fog(
         }
         // The Shadowed Fog is the slice's only Monte Carlo; the Fog adds its
         // single scattering by quadrature (see `lit_of_shadowed`).
-        let (view, key) = shadowed_view_and_key(sky, &job.settings, job.sampling, index, radius_km, top_km, &atm.content_hash, spectral, job.quality);
+        let (view, key) = shadowed_view_and_key(
+            sky,
+            &job.settings,
+            job.sampling,
+            index,
+            radius_km,
+            top_km,
+            &atm.content_hash,
+            spectral,
+            job.quality,
+        );
         let shadowed = match cache.get(&key) {
             Some(s) => {
                 fog.cached += 1;
@@ -209,7 +255,8 @@ pub fn bake_fog(
             }
             None => {
                 let (image, core_seconds) = render(&view, index)?;
-                let slice = slice_of_image(&image, &view, &format!("{} (shadowed fog)", sky.name), index, core_seconds)?;
+                let slice =
+                    slice_of_image(&image, &view, &format!("{} (shadowed fog)", sky.name), index, core_seconds)?;
                 cache.put(&key, &slice)?;
                 fog.rendered += 1;
                 fog.core_seconds += slice.core_seconds;
@@ -222,7 +269,12 @@ pub fn bake_fog(
         // the resampling's source.
         let lit_key = match job.sampling.fog_ms_size {
             None => slice_key(&atm.content_hash, spectral, &lit_view, job.quality.name()),
-            Some([w, h]) => slice_key(&atm.content_hash, spectral, &lit_view, &format!("{} fog_ms_size {w}x{h} {}", job.quality.name(), env!("SKY_FOG_RESAMPLE_SOURCE"))),
+            Some([w, h]) => slice_key(
+                &atm.content_hash,
+                spectral,
+                &lit_view,
+                &format!("{} fog_ms_size {w}x{h} {}", job.quality.name(), env!("SKY_FOG_RESAMPLE_SOURCE")),
+            ),
         };
         let lit = match cache.get(&lit_key) {
             Some(s) => s,
@@ -254,17 +306,32 @@ pub fn lit_of_shadowed(scene: &Scene, lit_view: &View, shadowed: &RenderedSlice)
     let start = Instant::now();
     let single = crate::render::single_per_pixel(scene, lit_view);
     let xyz = shadowed.xyz.iter().zip(&single).map(|(s, q)| std::array::from_fn(|c| s[c] + q[c])).collect();
-    RenderedSlice { xyz, core_seconds: start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64, ..shadowed.clone() }
+    RenderedSlice {
+        xyz,
+        core_seconds: start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64,
+        ..shadowed.clone()
+    }
 }
 
 /// The falloff and the Attenuation table, from the cache or computed.
-fn extras(job: &FogJob, geometry: FogGeometry, cache: &SliceCache, cancel: &AtomicBool) -> Result<FogExtras, BakeError> {
+fn extras(
+    job: &FogJob,
+    geometry: FogGeometry,
+    cache: &SliceCache,
+    cancel: &AtomicBool,
+) -> Result<FogExtras, BakeError> {
     let key = extras_key(&job.atmosphere.content_hash, &job.scene.spectral, &geometry, job.quality);
     if let Some(e) = cache.get_value::<FogExtras>(&key, "fog") {
         return Ok(e);
     }
-    let s = study(job.scene, geometry, &FALLOFF_SUN_ZENITHS_DEG, falloff_spp(job.quality), BAKE_SEED, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
-    let e = FogExtras { falloff: s.falloff, fit_error: s.fit_error, depth_free_error: s.depth_free_error, attenuation: AttenuationTable::compute(job.scene, geometry) };
+    let s = study(job.scene, geometry, &FALLOFF_SUN_ZENITHS_DEG, falloff_spp(job.quality), BAKE_SEED, cancel, &|| {})
+        .map_err(|_| BakeError::Cancelled)?;
+    let e = FogExtras {
+        falloff: s.falloff,
+        fit_error: s.fit_error,
+        depth_free_error: s.depth_free_error,
+        attenuation: super::tables::attenuation_table(job.scene, geometry),
+    };
     cache.put_value(&key, "fog", &e)?;
     Ok(e)
 }
@@ -285,7 +352,13 @@ mod tests {
     fn the_fog_is_its_shadowed_fog_plus_the_quadratures_single_scattering() {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh_hg.toml");
         let atm = Atmosphere::load(&path).unwrap();
-        let spectral = crate::bake::run::spectral_settings(&Sampling { band_nm: 10.0, spp: 16, max_rel_error: None, ms_grid: None, fog_ms_size: None });
+        let spectral = crate::bake::run::spectral_settings(&Sampling {
+            band_nm: 10.0,
+            spp: 16,
+            max_rel_error: None,
+            ms_grid: None,
+            fog_ms_size: None,
+        });
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
         let cancel = AtomicBool::new(false);
         let dirs = vec![(30.0, 0.0), (60.0, 90.0), (88.0, 180.0), (90.0, 10.0), (93.0, 0.0), (120.0, 45.0)];
@@ -298,15 +371,25 @@ mod tests {
                 ..View::directions(dirs.clone(), sun_zenith_deg, 0.0, 16, 7)
             };
             let (lit_view, shadowed_view) = (view(false), view(true));
-            let shadowed = slice_of_image(&render(&scene, &shadowed_view, &cancel, &|| {}).unwrap(), &shadowed_view, "t", 0, 0.0).unwrap();
+            let shadowed =
+                slice_of_image(&render(&scene, &shadowed_view, &cancel, &|| {}).unwrap(), &shadowed_view, "t", 0, 0.0)
+                    .unwrap();
             let derived = lit_of_shadowed(&scene, &lit_view, &shadowed);
-            let direct = slice_of_image(&render(&scene, &lit_view, &cancel, &|| {}).unwrap(), &lit_view, "t", 0, 0.0).unwrap();
+            let direct =
+                slice_of_image(&render(&scene, &lit_view, &cancel, &|| {}).unwrap(), &lit_view, "t", 0, 0.0).unwrap();
             assert_eq!(derived.samples, direct.samples);
             for i in 0..6 {
                 let (d, r) = (derived.xyz[i], direct.xyz[i]);
-                assert!(r[1] > shadowed.xyz[i][1] && shadowed.xyz[i][1] > 0.0, "texel {i}: the sun's single scattering adds light ({r:?}, {:?})", shadowed.xyz[i]);
+                assert!(
+                    r[1] > shadowed.xyz[i][1] && shadowed.xyz[i][1] > 0.0,
+                    "texel {i}: the sun's single scattering adds light ({r:?}, {:?})",
+                    shadowed.xyz[i]
+                );
                 for c in 0..3 {
-                    assert!((d[c] - r[c]).abs() <= 1e-9 * r[c], "sun zenith {sun_zenith_deg}, texel {i}, channel {c}: derived {d:?}, rendered {r:?}");
+                    assert!(
+                        (d[c] - r[c]).abs() <= 1e-9 * r[c],
+                        "sun zenith {sun_zenith_deg}, texel {i}, channel {c}: derived {d:?}, rendered {r:?}"
+                    );
                     let (ds, rs) = (derived.xyz_stderr[i][c], direct.xyz_stderr[i][c]);
                     assert!((ds - rs).abs() <= 1e-6 * rs + 1e-12 * r[c], "texel {i}: standard error {ds} against {rs}");
                 }

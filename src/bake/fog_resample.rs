@@ -30,12 +30,19 @@ pub fn resample_shadowed(slice: &RenderedSlice, width: usize, height: usize) -> 
             .collect()
     };
     let (us, vs) = (axis(width, slice.width), axis(height, slice.height));
-    let mut out =
-        RenderedSlice { width, height, xyz: Vec::with_capacity(width * height), xyz_stderr: Vec::with_capacity(width * height), samples: Vec::with_capacity(width * height), ..slice.clone() };
+    let mut out = RenderedSlice {
+        width,
+        height,
+        xyz: Vec::with_capacity(width * height),
+        xyz_stderr: Vec::with_capacity(width * height),
+        samples: Vec::with_capacity(width * height),
+        ..slice.clone()
+    };
     for &(j, b) in &vs {
         for &(i, a) in &us {
             let (i1, j1) = ((i + 1).min(slice.width - 1), (j + 1).min(slice.height - 1));
-            let corners = [(i, j, (1.0 - a) * (1.0 - b)), (i1, j, a * (1.0 - b)), (i, j1, (1.0 - a) * b), (i1, j1, a * b)];
+            let corners =
+                [(i, j, (1.0 - a) * (1.0 - b)), (i1, j, a * (1.0 - b)), (i, j1, (1.0 - a) * b), (i1, j1, a * b)];
             let (mut xyz, mut var) = ([0.0; 3], [0.0; 3]);
             for &(ci, cj, w) in &corners {
                 let k = cj * slice.width + ci;
@@ -68,7 +75,15 @@ mod tests {
         use crate::lut::fog::texel_position;
         let field = |u: f64, v: f64| [1.0 + 2.0 * u + 3.0 * v + 4.0 * u * v, 5.0 - u, 0.5 + v * u];
         let (w, h) = (5, 3);
-        let mut coarse = RenderedSlice { width: w, height: h, sun_zenith_deg: 60.0, xyz: vec![], xyz_stderr: vec![], samples: vec![], core_seconds: 7.0 };
+        let mut coarse = RenderedSlice {
+            width: w,
+            height: h,
+            sun_zenith_deg: 60.0,
+            xyz: vec![],
+            xyz_stderr: vec![],
+            samples: vec![],
+            core_seconds: 7.0,
+        };
         for j in 0..h {
             for i in 0..w {
                 coarse.xyz.push(field(texel_position(i, w), texel_position(j, h)));
@@ -88,7 +103,11 @@ mod tests {
         // Texel (2, 2) of 9 x 5 is rendered texel (1, 1) of 5 x 3; texel
         // (1, 1) lies midway between rendered (0..1, 0..1).
         assert_eq!((fine.xyz_stderr[2 * 9 + 2], fine.samples[2 * 9 + 2]), ([0.1; 3], coarse.samples[w + 1]));
-        assert!((fine.xyz_stderr[9 + 1][0] - 0.1 * (4.0 * 0.25f64.powi(2)).sqrt()).abs() < 1e-12, "{:?}", fine.xyz_stderr[9 + 1]);
+        assert!(
+            (fine.xyz_stderr[9 + 1][0] - 0.1 * (4.0 * 0.25f64.powi(2)).sqrt()).abs() < 1e-12,
+            "{:?}",
+            fine.xyz_stderr[9 + 1]
+        );
         assert_eq!(resample_shadowed(&coarse, w, h), coarse);
     }
 }

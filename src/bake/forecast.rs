@@ -30,6 +30,58 @@ pub(super) struct Forecasts {
     pub(super) fog_after: Vec<Vec<f64>>,
 }
 
+impl Forecasts {
+    /// All zero: no slice of `plan` forecast yet.
+    fn zero(plan: &[Planned]) -> Forecasts {
+        let zero: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
+        Forecasts { sky: zero.clone(), fog: zero.clone(), sky_after: zero.clone(), fog_after: zero }
+    }
+
+    /// The forecasts of slice `index` of basis sky `k`, core-seconds, in the
+    /// queue and after it: its fog slice's with `fog`, else the sky's.
+    fn slice_mut(&mut self, k: usize, index: usize, fog: bool) -> (&mut f64, &mut f64) {
+        if fog {
+            (&mut self.fog[k][index], &mut self.fog_after[k][index])
+        } else {
+            (&mut self.sky[k][index], &mut self.sky_after[k][index])
+        }
+    }
+}
+
+/// What the phases of [`forecast`] read: the plan of every basis sky, sky
+/// and fog, the sessions they render through, the bake, the cache folder
+/// of saved pilots, the tracker of planning's progress, and whether the
+/// bake was cancelled.
+struct Inputs<'a> {
+    plan: &'a [Planned],
+    fog_plan: &'a [Vec<FogTodo>],
+    sessions: &'a [Option<Session>],
+    bake: &'a BakeFile,
+    cache: &'a SliceCache,
+    tracker: &'a Mutex<Tracker>,
+    cancel: &'a AtomicBool,
+}
+
+impl<'a> Inputs<'a> {
+    /// Every view of basis sky `k` to render once: its slice index, the
+    /// view, and whether it is a fog slice's.
+    fn to_forecast(&self, k: usize) -> impl Iterator<Item = (usize, &'a View, bool)> + 'a {
+        let p = &self.plan[k];
+        let sky = p
+            .jobs
+            .iter()
+            .enumerate()
+            .filter(move |&(i, _)| p.same_as[i].is_none())
+            .filter_map(|(i, v)| v.as_ref().map(|v| (i, v, false)));
+        sky.chain(self.fog_plan[k].iter().map(|f| (f.index, &f.view, true)))
+    }
+
+    /// Every view of every basis sky to render once (see [`Inputs::to_forecast`]).
+    fn all_to_forecast(&self) -> impl Iterator<Item = (usize, &'a View, bool)> + '_ {
+        (0..self.plan.len()).flat_map(|k| self.to_forecast(k))
+    }
+}
+
 /// The forecast of every slice of `plan` to render, sky and fog
 /// (`fog_plan`), through each basis sky's session; saved pilots taken
 /// from, and new ones saved to, `cache`; planning's progress reported to
@@ -43,153 +95,215 @@ pub(super) fn forecast(
     (cache, tracker): (&SliceCache, &Mutex<Tracker>),
     cancel: &AtomicBool,
 ) -> Result<Forecasts, BakeError> {
-    // What the pilots say each slice will cost, core-seconds, by slice
-    // index: the sky's and the fog's, in the queue; and of the work on this
-    // process after the queue (single scattering by quadrature: a grid's
-    // resampling, the Fog from its Shadowed Fog), the sky's and the fog's.
-    let mut forecasts: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
-    let mut fog_forecasts = forecasts.clone();
-    let mut after_queue = forecasts.clone();
-    let mut fog_after_queue = forecasts.clone();
-    // Every view to render once, with whether it is a fog slice's.
-    let to_forecast = |k: usize| {
-        let p = &plan[k];
-        let sky = p.jobs.iter().enumerate().filter(|&(i, _)| p.same_as[i].is_none()).filter_map(|(i, v)| v.as_ref().map(|v| (i, v, false)));
-        sky.chain(fog_plan[k].iter().map(|f| (f.index, &f.view, true)))
-    };
-    if (0..plan.len()).flat_map(to_forecast).any(|(_, v, _)| pilot_view(v).is_some()) {
-        let start = Instant::now();
-        tracker.lock().unwrap().planning = true;
-        let (mut total, mut samples) = (0.0, 0u64);
-        let pilots = (0..plan.len()).filter(|&k| sessions[k].is_some()).flat_map(to_forecast).filter(|(_, v, _)| pilot_view(v).is_some()).count();
-        let (mut piloted, mut pilots_saved) = (0, 0);
-        for (k, p) in plan.iter().enumerate() {
-            let Some(session) = &sessions[k] else { continue };
-            for (index, view, fog) in to_forecast(k) {
-                let Some(pilot) = pilot_view(view) else { continue };
+    let inputs = Inputs { plan, fog_plan, sessions, bake, cache, tracker, cancel };
+    // Zero until a phase forecasts it: from pilots (adaptive sampling) or
+    // from probes (a fixed sample count).
+    let mut forecasts = Forecasts::zero(plan);
+    if inputs.all_to_forecast().any(|(_, v, _)| pilot_view(v).is_some()) {
+        forecast_from_pilots(&inputs, &mut forecasts)?;
+    } else if inputs.all_to_forecast().count() >= MIN_SLICES_TO_PROBE {
+        forecast_from_probes(&inputs, &mut forecasts)?;
+    }
+    Ok(forecasts)
+}
+
+/// Adaptive sampling: each view's forecast from its pilot, saved in the
+/// cache folder, or rendered and timed here and saved there, into
+/// `forecasts`.
+fn forecast_from_pilots(inputs: &Inputs, forecasts: &mut Forecasts) -> Result<(), BakeError> {
+    let Inputs { plan, sessions, bake, cache, tracker, cancel, .. } = *inputs;
+    let start = Instant::now();
+    tracker.lock().unwrap().planning = true;
+    let (mut total, mut samples) = (0.0, 0u64);
+    let pilots = (0..plan.len())
+        .filter(|&k| sessions[k].is_some())
+        .flat_map(|k| inputs.to_forecast(k))
+        .filter(|(_, v, _)| pilot_view(v).is_some())
+        .count();
+    let (mut piloted, mut pilots_saved) = (0, 0);
+    for (k, p) in plan.iter().enumerate() {
+        let Some(session) = &sessions[k] else { continue };
+        for (index, view, fog) in inputs.to_forecast(k) {
+            let Some(pilot) = pilot_view(view) else { continue };
+            if cancel.load(Ordering::SeqCst) {
+                return Err(BakeError::Cancelled);
+            }
+            tracker.lock().unwrap().current = (p.out.sky.name.clone(), index);
+            // What the pilot's quadrature times: a grid slice's own view,
+            // or the Fog LUT's size.
+            let grid_slice = p.grid.filter(|_| !fog).map(|_| &p.views[index].as_ref().expect("to render").0);
+            let key = pilot_key(
+                &session.job(&pilot).hash,
+                &serde_json::json!({ "grid_slice": grid_slice, "fog_lut": fog.then_some([bake.fog.width, bake.fog.height]) }),
+            );
+            let saved = cache.get_value::<PilotForecast>(&key, "pilot");
+            pilots_saved += saved.is_some() as usize;
+            let forecast = match saved {
+                Some(saved) => saved,
+                None => {
+                    let after = match (fog, p.grid, grid_slice) {
+                        (true, ..) => AfterQueue::Fog { lut_texels: bake.fog.width * bake.fog.height },
+                        (false, Some(grid), Some(slice)) => AfterQueue::Grid(grid, slice),
+                        _ => AfterQueue::Nothing,
+                    };
+                    let forecast = pilot_forecast(&session.scene, view, &pilot, after, cancel)?;
+                    cache.put_value(&key, "pilot", &forecast)?;
+                    forecast
+                }
+            };
+            let (f, after) = forecasts.slice_mut(k, index, fog);
+            *f = forecast.queue_core_seconds;
+            *after = forecast.after_queue_core_seconds;
+            total += *f + *after;
+            samples += forecast.samples;
+            piloted += 1;
+            tracker.lock().unwrap().planned_one(
+                "pilots",
+                start,
+                (&p.out.sky.name, index, fog),
+                (piloted, pilots),
+                Some(*f + *after),
+            );
+        }
+    }
+    tracker.lock().unwrap().forecast("pilots", start, (total, samples), pilots_saved);
+    Ok(())
+}
+
+/// A fixed sample count (a draft): every texel takes the same samples,
+/// but a texel's cost differs from sky to sky (a cloudy texel costs 6
+/// times a clear one) and with the sun (twilight paths are longer).
+/// Probes of a few slices at a sixteenth of their texels time it
+/// ([`probe_slice`]); the other slices' cost per texel is interpolated in
+/// the slice index, into `forecasts`.
+fn forecast_from_probes(inputs: &Inputs, forecasts: &mut Forecasts) -> Result<(), BakeError> {
+    let Inputs { plan, fog_plan, sessions, bake, tracker, cancel, .. } = *inputs;
+    let start = Instant::now();
+    tracker.lock().unwrap().planning = true;
+    let (mut total, mut samples) = (0.0, 0u64);
+    // The probes to render: a sky's, and its fog's, at each of
+    // PROBE_SLICES that it has.
+    let has_probes =
+        |k: usize, fog: bool| if fog { !fog_plan[k].is_empty() } else { plan[k].views.iter().any(Option::is_some) };
+    let probes: usize = (0..plan.len())
+        .filter(|&k| sessions[k].is_some())
+        .map(|k| {
+            [false, true].into_iter().filter(|&fog| has_probes(k, fog)).count()
+                * PROBE_SLICES.iter().filter(|&&i| i < plan[k].out.sky.slices).count()
+        })
+        .sum();
+    let mut probed = 0;
+    for (k, p) in plan.iter().enumerate() {
+        let Some(session) = &sessions[k] else { continue };
+        let sky = &p.out.sky;
+        // The sky's probes, then the fog's.
+        for fog in [false, true] {
+            if !has_probes(k, fog) {
+                continue;
+            }
+            let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
+            // The quadrature after the queue, core-seconds per slice.
+            let mut per_slice_after: Vec<(usize, f64)> = Vec::new();
+            for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
                 if cancel.load(Ordering::SeqCst) {
                     return Err(BakeError::Cancelled);
                 }
-                tracker.lock().unwrap().current = (p.out.sky.name.clone(), index);
-                // What the pilot's quadrature times: a grid slice's own view,
-                // or the Fog LUT's size.
-                let grid_slice = p.grid.filter(|_| !fog).map(|_| &p.views[index].as_ref().expect("to render").0);
-                let key = pilot_key(&session.job(&pilot).hash, &serde_json::json!({ "grid_slice": grid_slice, "fog_lut": fog.then_some([bake.fog.width, bake.fog.height]) }));
-                let saved = cache.get_value::<PilotForecast>(&key, "pilot");
-                pilots_saved += saved.is_some() as usize;
-                let forecast = match saved {
-                    Some(saved) => saved,
-                    None => {
-                        let after = match (fog, p.grid, grid_slice) {
-                            (true, ..) => AfterQueue::Fog { lut_texels: bake.fog.width * bake.fog.height },
-                            (false, Some(grid), Some(slice)) => AfterQueue::Grid(grid, slice),
-                            _ => AfterQueue::Nothing,
-                        };
-                        let forecast = pilot_forecast(&session.scene, view, &pilot, after, cancel)?;
-                        cache.put_value(&key, "pilot", &forecast)?;
-                        forecast
-                    }
-                };
-                let (f, after) = if fog { (&mut fog_forecasts[k][index], &mut fog_after_queue[k][index]) } else { (&mut forecasts[k][index], &mut after_queue[k][index]) };
-                *f = forecast.queue_core_seconds;
-                *after = forecast.after_queue_core_seconds;
+                tracker.lock().unwrap().current = (sky.name.clone(), index);
+                let cost = probe_slice(&session.scene, p, bake, (index, fog), cancel)?;
+                per_slice_fixed.push((index, cost.fixed_core_s));
+                per_slice_after.push((index, cost.after_queue_core_s));
+                per_texel.push((index, cost.per_texel_core_s));
+                probed += 1;
+                tracker.lock().unwrap().planned_one("probes", start, (&sky.name, index, fog), (probed, probes), None);
+            }
+            for (index, view, is_fog) in inputs.to_forecast(k).filter(|v| v.2 == fog) {
+                let texels = (view.width * view.height) as f64;
+                let (f, after) = forecasts.slice_mut(k, index, is_fog);
+                *f = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
+                *after = interpolate(&per_slice_after, index);
                 total += *f + *after;
-                samples += forecast.samples;
-                piloted += 1;
-                tracker.lock().unwrap().planned_one("pilots", start, (&p.out.sky.name, index, fog), (piloted, pilots), Some(*f + *after));
+                samples += texels as u64 * view.spp as u64;
             }
         }
-        tracker.lock().unwrap().forecast("pilots", start, (total, samples), pilots_saved);
-    } else if (0..plan.len()).flat_map(to_forecast).count() >= MIN_SLICES_TO_PROBE {
-        // A fixed sample count (a draft): every texel takes the same
-        // samples, but a texel's cost differs from sky to sky (a cloudy
-        // texel costs 6 times a clear one) and with the sun (twilight paths
-        // are longer). Probes of a few slices at a sixteenth of their texels
-        // time it; the other slices' cost per texel is interpolated in the
-        // slice index.
-        let start = Instant::now();
-        tracker.lock().unwrap().planning = true;
-        let (mut total, mut samples) = (0.0, 0u64);
-        // The probes to render: a sky's, and its fog's, at each of
-        // PROBE_SLICES that it has.
-        let has_probes = |k: usize, fog: bool| if fog { !fog_plan[k].is_empty() } else { plan[k].views.iter().any(Option::is_some) };
-        let probes: usize = (0..plan.len())
-            .filter(|&k| sessions[k].is_some())
-            .map(|k| [false, true].into_iter().filter(|&fog| has_probes(k, fog)).count() * PROBE_SLICES.iter().filter(|&&i| i < plan[k].out.sky.slices).count())
-            .sum();
-        let mut probed = 0;
-        for (k, p) in plan.iter().enumerate() {
-            let Some(session) = &sessions[k] else { continue };
-            let sky = &p.out.sky;
-            // The sky's probes, then the fog's: a fog slice's probe is the
-            // Fog LUT's directions at a quarter of its size each way, and
-            // its texels' cost adds the quadrature's.
-            for fog in [false, true] {
-                if !has_probes(k, fog) {
-                    continue;
-                }
-                let (mut per_texel, mut per_slice_fixed): (Vec<(usize, f64)>, Vec<(usize, f64)>) = (Vec::new(), Vec::new());
-                // The quadrature after the queue, core-seconds per slice.
-                let mut per_slice_after: Vec<(usize, f64)> = Vec::new();
-                for &index in PROBE_SLICES.iter().filter(|&&i| i < sky.slices) {
-                    if cancel.load(Ordering::SeqCst) {
-                        return Err(BakeError::Cancelled);
-                    }
-                    tracker.lock().unwrap().current = (sky.name.clone(), index);
-                    // A slice from a grid: every PROBE_STRIDE²-th node, and the
-                    // quadrature at every texel, timed on a quarter of them.
-                    let mut grid_quadrature = 0.0;
-                    let probe = if fog {
-                        let f = &bake.fog;
-                        let smaller = super::file::FogSettings { width: (f.width / PROBE_STRIDE).max(1), height: (f.height / PROBE_STRIDE).max(1), ..*f };
-                        super::fog::fog_view(sky, &smaller, &p.out.sampling, index, p.out.radius_km, p.out.top_km, true)
-                    } else {
-                        let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
-                        let smaller = View { width: (full.width / PROBE_STRIDE).max(1), height: (full.height / PROBE_STRIDE).max(1), ..full.clone() };
-                        match p.grid {
-                            Some(g) => {
-                                // (the texels' quadrature timed on the probe's
-                                // texels, the nodes' on the slice's own)
-                                let texels_quadrature = super::ms_grid::time_single(&session.scene, &smaller) * (full.width * full.height) as f64 / (smaller.width * smaller.height) as f64;
-                                grid_quadrature = texels_quadrature + g.time_nodes_quadrature(&session.scene, &full);
-                                g.probe_view(&full, PROBE_STRIDE * PROBE_STRIDE)
-                            }
-                            None => smaller,
-                        }
-                    };
-                    // Rendered here, on this process's threads, in one piece: on
-                    // the farm a probe's few columns would go out as several
-                    // small tasks, each preparing the tracers and guides of its
-                    // sun again, a cost the slices' large tasks spread thin (the
-                    // forecast came out 43 % high). The rest of a render's cost
-                    // per render, not per texel, a one-texel render of the same
-                    // view measures.
-                    let timed = |v: &View| timed_here(&session.scene, v, cancel).map(|(_, core_s, _)| core_s);
-                    let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
-                    let texels = (probe.width * probe.height) as f64;
-                    let whole = timed(&probe)?;
-                    // A fog slice's quadrature, timed on its probe, for the
-                    // whole slice (every fog slice has the Fog LUT's size).
-                    let fog_quadrature = if fog { super::fog::time_quadrature(&session.scene, &probe) * (bake.fog.width * bake.fog.height) as f64 / texels } else { 0.0 };
-                    per_slice_fixed.push((index, fixed));
-                    per_slice_after.push((index, grid_quadrature + fog_quadrature));
-                    per_texel.push((index, ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0)));
-                    probed += 1;
-                    tracker.lock().unwrap().planned_one("probes", start, (&sky.name, index, fog), (probed, probes), None);
-                }
-                for (index, view, is_fog) in to_forecast(k).filter(|v| v.2 == fog) {
-                    let texels = (view.width * view.height) as f64;
-                    let (f, after) = if is_fog { (&mut fog_forecasts[k][index], &mut fog_after_queue[k][index]) } else { (&mut forecasts[k][index], &mut after_queue[k][index]) };
-                    *f = interpolate(&per_slice_fixed, index) + texels * interpolate(&per_texel, index);
-                    *after = interpolate(&per_slice_after, index);
-                    total += *f + *after;
-                    samples += texels as u64 * view.spp as u64;
-                }
-            }
-        }
-        tracker.lock().unwrap().forecast("probes", start, (total, samples), 0);
     }
-    Ok(Forecasts { sky: forecasts, fog: fog_forecasts, sky_after: after_queue, fog_after: fog_after_queue })
+    tracker.lock().unwrap().forecast("probes", start, (total, samples), 0);
+    Ok(())
+}
+
+/// What a probe of one slice measured, core-seconds: the part of its
+/// render per render, the part per texel, and the quadrature after the
+/// queue for the whole slice.
+struct ProbeCost {
+    fixed_core_s: f64,
+    per_texel_core_s: f64,
+    after_queue_core_s: f64,
+}
+
+/// Renders and times here the probe of slice `index` of `p` (its fog
+/// slice's with `fog`). A sky slice's probe is its view at a quarter of
+/// its size each way, or, from a grid, every PROBE_STRIDE²-th node, with
+/// the quadrature at every texel timed on a quarter of them; a fog
+/// slice's is the Fog LUT's directions at a quarter of its size each
+/// way, and its texels' cost adds the quadrature's.
+fn probe_slice(
+    scene: &Scene,
+    p: &Planned,
+    bake: &BakeFile,
+    (index, fog): (usize, bool),
+    cancel: &AtomicBool,
+) -> Result<ProbeCost, BakeError> {
+    let sky = &p.out.sky;
+    let mut grid_quadrature = 0.0;
+    let probe = if fog {
+        let f = &bake.fog;
+        let smaller = super::file::FogSettings {
+            width: (f.width / PROBE_STRIDE).max(1),
+            height: (f.height / PROBE_STRIDE).max(1),
+            ..*f
+        };
+        super::fog::fog_view(sky, &smaller, &p.out.sampling, index, p.out.radius_km, p.out.top_km, true)
+    } else {
+        let full = slice_view(sky, &p.out.sampling, index, p.out.radius_km, p.out.top_km, p.out.threshold_deg);
+        let smaller = View {
+            width: (full.width / PROBE_STRIDE).max(1),
+            height: (full.height / PROBE_STRIDE).max(1),
+            ..full.clone()
+        };
+        match p.grid {
+            Some(g) => {
+                // (the texels' quadrature timed on the probe's texels, the
+                // nodes' on the slice's own)
+                let texels_quadrature = super::ms_grid::time_single(scene, &smaller)
+                    * (full.width * full.height) as f64
+                    / (smaller.width * smaller.height) as f64;
+                grid_quadrature = texels_quadrature + g.time_nodes_quadrature(scene, &full);
+                g.probe_view(&full, PROBE_STRIDE * PROBE_STRIDE)
+            }
+            None => smaller,
+        }
+    };
+    // Rendered here, on this process's threads, in one piece: on the farm
+    // a probe's few columns would go out as several small tasks, each
+    // preparing the tracers and guides of its sun again, a cost the
+    // slices' large tasks spread thin (the forecast came out 43 % high).
+    // The rest of a render's cost per render, not per texel, a one-texel
+    // render of the same view measures.
+    let timed = |v: &View| timed_here(scene, v, cancel).map(|(_, core_s, _)| core_s);
+    let fixed = timed(&View { width: 1, height: 1, ..probe.clone() })?;
+    let texels = (probe.width * probe.height) as f64;
+    let whole = timed(&probe)?;
+    // A fog slice's quadrature, timed on its probe, for the whole slice
+    // (every fog slice has the Fog LUT's size).
+    let fog_quadrature = if fog {
+        super::fog::time_quadrature(scene, &probe) * (bake.fog.width * bake.fog.height) as f64 / texels
+    } else {
+        0.0
+    };
+    Ok(ProbeCost {
+        fixed_core_s: fixed,
+        per_texel_core_s: ((whole - fixed) / (texels - 1.0).max(1.0)).max(0.0),
+        after_queue_core_s: grid_quadrature + fog_quadrature,
+    })
 }
 
 /// The pilot of an adaptively sampled view: the same view at the pilot's
@@ -207,7 +321,17 @@ pub fn pilot_view(view: &View) -> Option<View> {
 pub fn planned_samples(view: &View, pilot: &Image) -> Vec<u32> {
     let target = view.max_rel_error.unwrap_or(0.0);
     let left = view.spp.saturating_sub(ADAPTIVE_PILOT_SPP);
-    pilot.pixels.iter().map(|p| if p.samples == 0 { 0 } else { ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left) }).collect()
+    pilot
+        .pixels
+        .iter()
+        .map(|p| {
+            if p.samples == 0 {
+                0
+            } else {
+                ADAPTIVE_PILOT_SPP + adaptive::samples_for(p.xyz[1], p.xyz_stderr[1], p.samples as f64, target, left)
+            }
+        })
+        .collect()
 }
 
 /// The slices a draft's forecast times: day, low sun, sunset, the horizon,
@@ -278,7 +402,9 @@ enum AfterQueue<'a> {
 /// forecast's code, and this machine, its name and threads: the times are
 /// this machine's (another machine, or another thread count, plans again).
 fn pilot_key(pilot_job_hash: &str, quadrature_of: &serde_json::Value) -> String {
-    let host = std::fs::read_to_string("/proc/sys/kernel/hostname").or_else(|_| std::env::var("COMPUTERNAME")).unwrap_or_default();
+    let host = std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .or_else(|_| std::env::var("COMPUTERNAME"))
+        .unwrap_or_default();
     let key = serde_json::json!({
         "pilot": pilot_job_hash,
         "quadrature": quadrature_of,
@@ -291,7 +417,13 @@ fn pilot_key(pilot_job_hash: &str, quadrature_of: &serde_json::Value) -> String 
 
 /// The forecast of `view`'s adaptive render from its `pilot` rendered and
 /// timed here, with the quadrature `after` it.
-fn pilot_forecast(scene: &Scene, view: &View, pilot: &View, after: AfterQueue, cancel: &AtomicBool) -> Result<PilotForecast, BakeError> {
+fn pilot_forecast(
+    scene: &Scene,
+    view: &View,
+    pilot: &View,
+    after: AfterQueue,
+    cancel: &AtomicBool,
+) -> Result<PilotForecast, BakeError> {
     // A render's cost is a part per render and per texel (the job, the
     // first-collision guide, single scattering) and a part per sample: the
     // pilot and a one-sample render of the same view tell them apart.
@@ -308,14 +440,21 @@ fn pilot_forecast(scene: &Scene, view: &View, pilot: &View, after: AfterQueue, c
     // the noisy one that takes many. One mean cost a sample, as before,
     // forecast twilight grid slices 18 to 27 % low (README).
     let sampling_core_s = (pilot_core_s - one_core_s).max(0.0);
-    let planned_cost = sample_weighted(&planned, &pilot_pixel_s, &one_pixel_s) * sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64;
+    let planned_cost =
+        sample_weighted(&planned, &pilot_pixel_s, &one_pixel_s) * sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64;
     let fixed = (one_core_s - sampling_core_s / (ADAPTIVE_PILOT_SPP - 1) as f64).max(0.0);
     let after_queue_core_seconds = match after {
-        AfterQueue::Fog { lut_texels } => super::fog::time_quadrature(scene, view) * lut_texels as f64 / (view.width * view.height) as f64,
+        AfterQueue::Fog { lut_texels } => {
+            super::fog::time_quadrature(scene, view) * lut_texels as f64 / (view.width * view.height) as f64
+        }
         AfterQueue::Grid(grid, slice) => grid.time_quadrature(scene, slice),
         AfterQueue::Nothing => 0.0,
     };
-    Ok(PilotForecast { queue_core_seconds: fixed + planned_cost, after_queue_core_seconds, samples: planned.iter().map(|&n| n as u64).sum() })
+    Ok(PilotForecast {
+        queue_core_seconds: fixed + planned_cost,
+        after_queue_core_seconds,
+        samples: planned.iter().map(|&n| n as u64).sum(),
+    })
 }
 
 /// Renders `view` on this process's threads in one piece: its image, its
@@ -325,7 +464,8 @@ fn pilot_forecast(scene: &Scene, view: &View, pilot: &View, after: AfterQueue, c
 /// preparing its sun's tracers and guides again.
 fn timed_here(scene: &Scene, view: &View, cancel: &AtomicBool) -> Result<(Image, f64, Vec<f64>), BakeError> {
     let start = Instant::now();
-    let (image, pixel_s) = crate::render::render_timed(scene, view, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
+    let (image, pixel_s) =
+        crate::render::render_timed(scene, view, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?;
     Ok((image, start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64, pixel_s))
 }
 
@@ -355,7 +495,8 @@ mod tests {
     /// exactly the samples each texel of the adaptive render then takes.
     #[test]
     fn pilots_plan_every_texels_samples_exactly() {
-        let sampling = Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05), ms_grid: None, fog_ms_size: None };
+        let sampling =
+            Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05), ms_grid: None, fog_ms_size: None };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let mut total = 0u64;
@@ -370,6 +511,8 @@ mod tests {
         }
         // Not every texel at the floor or the cap: the plan has something to predict.
         assert!(total > 3 * 64 * 64 && total < 3 * 64 * 400, "{total}");
-        assert!(pilot_view(&View { max_rel_error: None, ..slice_view(&sky, &sampling, 0, 6371.0, 100.0, 87.5) }).is_none());
+        assert!(
+            pilot_view(&View { max_rel_error: None, ..slice_view(&sky, &sampling, 0, 6371.0, 100.0, 87.5) }).is_none()
+        );
     }
 }

@@ -5,7 +5,8 @@
 //! the sky texture leaves out). Kept in the slice cache under a key of its
 //! own, so a re-run with nothing changed prepares no optics.
 
-use crate::lut::transmittance::{sun_xyz_at, TransmittanceTable};
+use super::tables::{sun_xyz_at, transmittance_table};
+use crate::lut::transmittance::TransmittanceTable;
 use crate::render::Scene;
 use serde::{Deserialize, Serialize};
 
@@ -28,9 +29,12 @@ impl SkyLighting {
     pub fn compute(scene: &Scene, altitude_m: f64, sun_zenith_deg: &[f64]) -> SkyLighting {
         let z_km = altitude_m / 1000.0;
         SkyLighting {
-            transmittance: TransmittanceTable::compute(scene),
+            transmittance: transmittance_table(scene),
             sun_angular_diameter_deg: scene.sun_angular_diameter_deg,
-            irradiance_xyz: sun_zenith_deg.iter().map(|&z| sun_xyz_at(scene, z_km, libm::cos(z.to_radians()))).collect(),
+            irradiance_xyz: sun_zenith_deg
+                .iter()
+                .map(|&z| sun_xyz_at(scene, z_km, libm::cos(z.to_radians())))
+                .collect(),
         }
     }
 
@@ -41,7 +45,12 @@ impl SkyLighting {
 }
 
 /// The cache key of a basis sky's lighting.
-pub fn lighting_key(atmosphere_hash: &str, spectral: &crate::render::SpectralSettings, altitude_m: f64, sun_zenith_deg: &[f64]) -> String {
+pub fn lighting_key(
+    atmosphere_hash: &str,
+    spectral: &crate::render::SpectralSettings,
+    altitude_m: f64,
+    sun_zenith_deg: &[f64],
+) -> String {
     let key = serde_json::json!({
         "what": "lighting",
         "atmosphere": atmosphere_hash,

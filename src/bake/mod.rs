@@ -4,11 +4,11 @@
 //! embedded worker or the farm, reporting [`BakeEvent`]s; the packing into
 //! texture arrays and the manifest follow.
 
-pub mod bench;
-pub mod bench_coarse;
 pub mod cache;
 pub mod file;
+mod finish;
 pub mod fog;
+pub mod fog_falloff;
 pub mod fog_resample;
 mod forecast;
 pub mod lighting;
@@ -17,16 +17,18 @@ pub mod openjd;
 pub mod pack;
 pub mod pack_ambient;
 pub mod pack_fog;
+mod plan;
+mod queue;
 pub mod run;
+pub mod slices;
+pub mod tables;
 mod tracker;
-pub mod verify;
-pub mod verify_fog;
 
 pub use cache::{RenderedSlice, SliceCache};
 pub use file::{BakeFile, BakeFileError, BasisSky, Quality, Sampling};
 pub use run::{render_slices, BakeOptions, SkySlices, SliceId};
 
-use crate::farm::events::FarmEvent;
+use crate::session::farm::FarmEvent;
 use std::sync::Arc;
 
 /// What a bake reports while it runs. The library only emits these; the
@@ -53,17 +55,44 @@ pub enum BakeEvent {
     /// fog slice's if `fog`); `eta_s` for the rest of planning at its pace
     /// so far; a pilot's `forecast_core_seconds` of its slice (its
     /// render in the queue and the quadrature after it).
-    Planning { from: &'static str, sky: String, index: usize, fog: bool, done: usize, total: usize, elapsed_s: f64, eta_s: f64, forecast_core_seconds: Option<f64> },
+    Planning {
+        from: &'static str,
+        sky: String,
+        index: usize,
+        fog: bool,
+        done: usize,
+        total: usize,
+        elapsed_s: f64,
+        eta_s: f64,
+        forecast_core_seconds: Option<f64>,
+    },
     /// One slice is done (rendered now, or found in the cache), with what
     /// it cost and, rendered now after a forecast, what was forecast.
-    Slice { sky: String, index: usize, sun_zenith_deg: f64, cached: bool, core_seconds: f64, forecast_core_seconds: Option<f64>, mean_samples: f64 },
+    Slice {
+        sky: String,
+        index: usize,
+        sun_zenith_deg: f64,
+        cached: bool,
+        core_seconds: f64,
+        forecast_core_seconds: Option<f64>,
+        mean_samples: f64,
+    },
     /// Every slice of a basis sky is done.
     SkyDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64 },
     /// A fog slice of a basis sky is done: its Fog and Shadowed Fog
     /// (`done` of `total`, rendered now or found in the cache).
     FogSlice { sky: String, done: usize, total: usize },
     /// Every fog slice of a basis sky is done, with the falloff's fit.
-    FogDone { sky: String, slices_rendered: usize, slices_cached: usize, core_seconds: f64, falloff_a: f64, falloff_p: f64, fit_median: f64, fit_p99: f64 },
+    FogDone {
+        sky: String,
+        slices_rendered: usize,
+        slices_cached: usize,
+        core_seconds: f64,
+        falloff_a: f64,
+        falloff_p: f64,
+        fit_median: f64,
+        fit_p99: f64,
+    },
     /// Periodic progress over the whole bake.
     Progress(BakeProgress),
     /// A farm event of the slice being rendered (worker quarantined, task
@@ -119,13 +148,13 @@ pub enum BakeError {
     #[error("{0}")]
     Cache(#[from] cache::CacheError),
     #[error("basis sky {sky}, slice {index}: {source}")]
-    Render { sky: String, index: usize, source: crate::farm::coordinator::FarmError },
+    Render { sky: String, index: usize, source: crate::session::farm::FarmError },
     #[error("basis sky {sky}, slices {first} to {last}: {source}")]
-    RenderSlices { sky: String, first: usize, last: usize, source: crate::farm::coordinator::FarmError },
+    RenderSlices { sky: String, first: usize, last: usize, source: crate::session::farm::FarmError },
     #[error("the slices of basis skies {skies}: {source}")]
-    RenderQueue { skies: String, source: crate::farm::coordinator::FarmError },
+    RenderQueue { skies: String, source: crate::session::farm::FarmError },
     #[error("the bake's journal: {0}")]
-    Journal(crate::farm::journal::JournalError),
+    Journal(crate::session::farm::JournalError),
     #[error("--slice {0}: no such basis sky or slice (NAME:INDEX, INDEX from 0 to 63)")]
     NoSuchSlice(String),
     #[error("basis sky {sky}, slice {index}, texel (u {u}, v {v}): {what} is not finite")]
@@ -143,7 +172,7 @@ pub enum BakeError {
 impl BakeError {
     /// Whether the bake was stopped (Ctrl-C) rather than failed.
     pub fn is_cancelled(&self) -> bool {
-        use crate::farm::coordinator::FarmError;
+        use crate::session::farm::FarmError;
         matches!(
             self,
             BakeError::Cancelled

@@ -22,7 +22,7 @@
 //! superset of JSON), so no quoting rule of YAML can bite.
 
 use super::file::{BakeFile, Quality};
-use crate::lut::colour::ColourSpace;
+use crate::colour::ColourSpace;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -85,16 +85,33 @@ pub fn render_tasks(bake: &BakeFile) -> Vec<String> {
 /// The job template of `bake` (see the module documentation).
 pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String {
     let slices = render_tasks(bake).into_iter().map(|t| q(&t));
-    let common = ["{{Param.BakeFile}}", "--out", "{{Param.OutDir}}", "--cache", "{{Param.CacheDir}}", "--quality", "{{Param.Quality}}"];
+    let common = [
+        "{{Param.BakeFile}}",
+        "--out",
+        "{{Param.OutDir}}",
+        "--cache",
+        "{{Param.CacheDir}}",
+        "--quality",
+        "{{Param.Quality}}",
+    ];
     let args = |extra: &[&str]| list(["bake-luts"].iter().chain(common.iter()).chain(extra.iter()).map(|a| q(a)));
     let mut t = String::new();
     let w = &mut t;
     // `write!` to a String cannot fail.
-    let _ = writeln!(w, "# An Open Job Description job template written by `sky bake-luts --plan openjd` (sky {}).", env!("CARGO_PKG_VERSION"));
+    let _ = writeln!(
+        w,
+        "# An Open Job Description job template written by `sky bake-luts --plan openjd` (sky {}).",
+        env!("CARGO_PKG_VERSION")
+    );
     let _ = writeln!(w, "# Render: one task per (basis sky, slice) and per fog slice into the shared slice cache; Pack: the LUT files and");
-    let _ = writeln!(w, "# manifest.json from the cache, after every Render task. Check it with `openjd check`, run it");
-    let _ = writeln!(w, "# locally with `openjd run {TEMPLATE_FILE} --step Pack --run-dependencies`, or submit it to a farm");
-    let _ = writeln!(w, "# manager that reads Open Job Description (AWS Deadline Cloud). Relative paths are relative to");
+    let _ =
+        writeln!(w, "# manifest.json from the cache, after every Render task. Check it with `openjd check`, run it");
+    let _ = writeln!(
+        w,
+        "# locally with `openjd run {TEMPLATE_FILE} --step Pack --run-dependencies`, or submit it to a farm"
+    );
+    let _ =
+        writeln!(w, "# manager that reads Open Job Description (AWS Deadline Cloud). Relative paths are relative to");
     let _ = writeln!(w, "# this file's folder; the hosts must all see the cache folder.");
     let _ = writeln!(w, "specificationVersion: {}", q(SPECIFICATION_VERSION));
     let _ = writeln!(w, "name: {}", q(job_name));
@@ -106,20 +123,58 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
     );
     // The PATH parameters: name, object type, data flow, description, default.
     let paths = [
-        ("BakeFile", "FILE", "IN", "The bake file (its atmosphere files are found relative to it)", d.bake_file.clone()),
+        (
+            "BakeFile",
+            "FILE",
+            "IN",
+            "The bake file (its atmosphere files are found relative to it)",
+            d.bake_file.clone(),
+        ),
         ("OutDir", "DIRECTORY", "OUT", "Where Pack writes the LUT files and manifest.json", Some(d.out_dir.clone())),
-        ("CacheDir", "DIRECTORY", "INOUT", "The content-addressed slice cache, shared by every task", d.cache_dir.clone()),
+        (
+            "CacheDir",
+            "DIRECTORY",
+            "INOUT",
+            "The content-addressed slice cache, shared by every task",
+            d.cache_dir.clone(),
+        ),
     ];
     for (name, object, flow, description, default) in &paths {
-        let _ = writeln!(w, "- name: {}\n  type: \"PATH\"\n  objectType: {}\n  dataFlow: {}\n  description: {}{}", q(name), q(object), q(flow), q(description), default_path(default));
+        let _ = writeln!(
+            w,
+            "- name: {}\n  type: \"PATH\"\n  objectType: {}\n  dataFlow: {}\n  description: {}{}",
+            q(name),
+            q(object),
+            q(flow),
+            q(description),
+            default_path(default)
+        );
     }
-    let _ = writeln!(w, "- name: \"Quality\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}", list([q("draft"), q("final")]), q(d.quality.name()));
-    let _ = writeln!(w, "- name: \"ColourSpace\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}", list(ColourSpace::ALL.iter().map(|c| q(c.name()))), q(d.colour_space.name()));
+    let _ = writeln!(
+        w,
+        "- name: \"Quality\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
+        list([q("draft"), q("final")]),
+        q(d.quality.name())
+    );
+    let _ = writeln!(
+        w,
+        "- name: \"ColourSpace\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
+        list(ColourSpace::ALL.iter().map(|c| q(c.name()))),
+        q(d.colour_space.name())
+    );
     let _ = writeln!(w, "steps:");
     let _ = writeln!(w, "- name: \"Render\"\n  parameterSpace:\n    taskParameterDefinitions:\n    - name: \"Slice\"\n      type: \"STRING\"\n      range: {}", list(slices));
-    let _ = writeln!(w, "  script:\n    actions:\n      onRun:\n        command: \"{{{{Param.SkyExecutable}}}}\"\n        args: {}", args(&["--slice", "{{Task.Param.Slice}}"]));
+    let _ = writeln!(
+        w,
+        "  script:\n    actions:\n      onRun:\n        command: \"{{{{Param.SkyExecutable}}}}\"\n        args: {}",
+        args(&["--slice", "{{Task.Param.Slice}}"])
+    );
     let _ = writeln!(w, "- name: \"Pack\"\n  dependencies:\n  - dependsOn: \"Render\"");
-    let _ = writeln!(w, "  script:\n    actions:\n      onRun:\n        command: \"{{{{Param.SkyExecutable}}}}\"\n        args: {}", args(&["--colour-space", "{{Param.ColourSpace}}", "--pack-only"]));
+    let _ = writeln!(
+        w,
+        "  script:\n    actions:\n      onRun:\n        command: \"{{{{Param.SkyExecutable}}}}\"\n        args: {}",
+        args(&["--colour-space", "{{Param.ColourSpace}}", "--pack-only"])
+    );
     t
 }
 

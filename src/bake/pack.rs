@@ -19,12 +19,11 @@
 use super::lighting::SkyLighting;
 use super::run::SkySlices;
 use super::BakeError;
+use crate::colour::ColourSpace;
+use crate::directions::mapping;
 use crate::lut::ambient::{self, Ambient};
-use crate::lut::colour::ColourSpace;
-use crate::lut::decode::mat_mul;
 use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
 use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry, SunEntry, TransmittanceEntry};
-use crate::lut::mapping;
 use crate::lut::r11g11b10::{self, PackStats};
 use crate::lut::texels::Texels;
 use crate::lut::{rgba16f, transmittance};
@@ -76,11 +75,24 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         let k = slice_scale_log2(max);
         let scale = (k as f64).exp2();
         let scaled: Vec<[f64; 3]> = rgb.iter().map(|p| p.map(|c| c * scale)).collect();
-        let (packed, st) = r11g11b10::pack_array(&scaled).map_err(|e| BakeError::NotFinite { sky: s.sky.name.clone(), index, u: e.texel % w, v: e.texel / w, what: "RGB" })?;
+        let (packed, st) = r11g11b10::pack_array(&scaled).map_err(|e| BakeError::NotFinite {
+            sky: s.sky.name.clone(),
+            index,
+            u: e.texel % w,
+            v: e.texel / w,
+            what: "RGB",
+        })?;
         words.extend(packed);
         stats.merge(&st);
-        let rel: Vec<f64> = slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
-        slices.push(SliceEntry { index, sun_zenith_deg: slice.sun_zenith_deg, scale_log2: k, mean_samples: slice.mean_samples(), median_rel_stderr_y: median(rel) });
+        let rel: Vec<f64> =
+            slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
+        slices.push(SliceEntry {
+            index,
+            sun_zenith_deg: slice.sun_zenith_deg,
+            scale_log2: k,
+            mean_samples: slice.mean_samples(),
+            median_rel_stderr_y: median(rel),
+        });
     }
     // Ambient light of each slice, from its rendered XYZ read as the
     // decoder reads it, in the bake's colour space.
@@ -136,7 +148,14 @@ impl PackedSky {
     /// records its size in the entry.
     pub fn write(&mut self, colour: ColourSpace, dir: &Path) -> Result<(), BakeError> {
         let e = &self.entry;
-        let tex = ArrayTexture { width: e.width as u32, height: e.height as u32, layers: e.layers as u32, colour_space: colour, texels: Texels::B10G11R11(&self.words), sky_json: &self.sky_json };
+        let tex = ArrayTexture {
+            width: e.width as u32,
+            height: e.height as u32,
+            layers: e.layers as u32,
+            colour_space: colour,
+            texels: Texels::B10G11R11(&self.words),
+            sky_json: &self.sky_json,
+        };
         self.entry.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
         Ok(())
     }
@@ -150,25 +169,37 @@ fn sun_entry(l: &SkyLighting, colour: ColourSpace) -> SunEntry {
         angular_diameter_deg: l.sun_angular_diameter_deg,
         solid_angle_sr: l.sun_solid_angle_sr(),
         top_irradiance_xyz: l.transmittance.top_xyz,
-        top_irradiance_rgb: mat_mul(&m, l.transmittance.top_xyz),
+        top_irradiance_rgb: crate::colour::apply(&m, l.transmittance.top_xyz),
         transmittance_layer: 0,
         irradiance_xyz: l.irradiance_xyz.clone(),
-        irradiance_rgb: l.irradiance_xyz.iter().map(|x| mat_mul(&m, *x)).collect(),
+        irradiance_rgb: l.irradiance_xyz.iter().map(|x| crate::colour::apply(&m, *x)).collect(),
     }
 }
 
 /// The transmittance file of the skies' lighting: one RGBA16F layer per
 /// basis sky, in `dir`; records each sky's layer in its entry.
-fn write_transmittance(skies: &[SkySlices], entries: &mut [SkyEntry], colour: ColourSpace, dir: &Path) -> Result<Option<TransmittanceEntry>, BakeError> {
-    let Some(lightings) = skies.iter().map(|s| s.lighting.as_ref()).collect::<Option<Vec<_>>>() else { return Ok(None) };
+fn write_transmittance(
+    skies: &[SkySlices],
+    entries: &mut [SkyEntry],
+    colour: ColourSpace,
+    dir: &Path,
+) -> Result<Option<TransmittanceEntry>, BakeError> {
+    let Some(lightings) = skies.iter().map(|s| s.lighting.as_ref()).collect::<Option<Vec<_>>>() else {
+        return Ok(None);
+    };
     let Some(first) = lightings.first() else { return Ok(None) };
     if let Some(k) = lightings.iter().position(|l| l.transmittance.mapping != first.transmittance.mapping) {
-        return Err(BakeError::Write(format!("the transmittance file is one mapping for all basis skies, but {}'s planet radius or top differ from {}'s", skies[k].sky.name, skies[0].sky.name)));
+        return Err(BakeError::Write(format!(
+            "the transmittance file is one mapping for all basis skies, but {}'s planet radius or top differ from {}'s",
+            skies[k].sky.name, skies[0].sky.name
+        )));
     }
     let m = colour.xyz_to_rgb();
     let mut halves = Vec::with_capacity(transmittance::WIDTH * transmittance::HEIGHT * lightings.len());
     for (k, l) in lightings.iter().enumerate() {
-        let (packed, _) = rgba16f::pack_array(&l.transmittance.channel_texels(&m)).map_err(|e| BakeError::Write(format!("{}: transmittance texel {}: {}", skies[k].sky.name, e.texel, e.source)))?;
+        let (packed, _) = rgba16f::pack_array(&l.transmittance.channel_texels(&m)).map_err(|e| {
+            BakeError::Write(format!("{}: transmittance texel {}: {}", skies[k].sky.name, e.texel, e.source))
+        })?;
         halves.extend(packed);
         if let Some(sun) = &mut entries[k].sun {
             sun.transmittance_layer = k;
@@ -190,7 +221,14 @@ fn write_transmittance(skies: &[SkySlices], entries: &mut [SkyEntry], colour: Co
         channels: "RGB: the transmittance of the sun's own spectrum to the top of the atmosphere per channel of the manifest's colour space (irradiance = sun.top_irradiance_rgb * T); a channel the sun's colour leaves the space's gamut in (blue, with the sun within a degree or two of the horizon, in Rec.709) is 0; A = 1".into(),
     };
     let json = serde_json::to_string(&entry).expect("an entry always serialises");
-    let tex = ArrayTexture { width: entry.width as u32, height: entry.height as u32, layers: lightings.len() as u32, colour_space: colour, texels: Texels::Rgba16f(&halves), sky_json: &json };
+    let tex = ArrayTexture {
+        width: entry.width as u32,
+        height: entry.height as u32,
+        layers: lightings.len() as u32,
+        colour_space: colour,
+        texels: Texels::Rgba16f(&halves),
+        sky_json: &json,
+    };
     entry.bytes = ktx2::write(&dir.join(&entry.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
     Ok(Some(entry))
 }
@@ -257,7 +295,12 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
 
 /// Packs every basis sky into `dir` and writes `dir/manifest.json` last
 /// (each file through a temporary file and a rename).
-pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: &Path) -> Result<(Manifest, Vec<PackStats>), BakeError> {
+pub fn write_bake(
+    skies: &[SkySlices],
+    quality: &str,
+    colour: ColourSpace,
+    dir: &Path,
+) -> Result<(Manifest, Vec<PackStats>), BakeError> {
     // Every sky packed before any file is written: a texel that is not
     // finite leaves no file behind.
     let mut packed = skies.iter().map(|s| pack_sky(s, colour)).collect::<Result<Vec<_>, _>>()?;
@@ -283,7 +326,8 @@ pub fn write_bake(skies: &[SkySlices], quality: &str, colour: ColourSpace, dir: 
     };
     let text = compact_number_arrays(&serde_json::to_string_pretty(&m).expect("a manifest always serialises"));
     let path = dir.join("manifest.json");
-    crate::lut::atomic::write_atomically(&path, text.as_bytes()).map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;
+    crate::atomic::write_atomically(&path, text.as_bytes())
+        .map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;
     Ok((m, stats))
 }
 

@@ -9,7 +9,7 @@
 
 use super::pack::slice_scale_log2;
 use super::BakeError;
-use crate::lut::colour::ColourSpace;
+use crate::colour::ColourSpace;
 use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
 use crate::lut::manifest::{AmbientFileEntry, SkyEntry};
 use crate::lut::rgba16f;
@@ -17,12 +17,19 @@ use crate::lut::texels::Texels;
 use std::path::Path;
 
 /// The rows of a layer.
-pub const ROWS: [&str; 11] = ["irradiance_up", "mean_radiance", "L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"];
+pub const ROWS: [&str; 11] =
+    ["irradiance_up", "mean_radiance", "L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"];
 
 /// Writes `dir/ambient.ktx2` from the skies' manifest entries (None when
 /// a sky has no ambient light, or the skies differ in slice count).
-pub fn write_ambient(entries: &[SkyEntry], colour: ColourSpace, dir: &Path) -> Result<Option<AmbientFileEntry>, BakeError> {
-    let Some(ambients) = entries.iter().map(|e| e.ambient.as_ref()).collect::<Option<Vec<_>>>() else { return Ok(None) };
+pub fn write_ambient(
+    entries: &[SkyEntry],
+    colour: ColourSpace,
+    dir: &Path,
+) -> Result<Option<AmbientFileEntry>, BakeError> {
+    let Some(ambients) = entries.iter().map(|e| e.ambient.as_ref()).collect::<Option<Vec<_>>>() else {
+        return Ok(None);
+    };
     let Some(slices) = ambients.first().map(|a| a.len()) else { return Ok(None) };
     if slices == 0 || ambients.iter().any(|a| a.len() != slices) {
         return Ok(None);
@@ -45,7 +52,13 @@ pub fn write_ambient(entries: &[SkyEntry], colour: ColourSpace, dir: &Path) -> R
         let scale = (k as f64).exp2();
         for (r, row) in rows.iter().enumerate() {
             for (i, v) in row.iter().enumerate() {
-                let h = rgba16f::pack_signed(v.map(|c| c * scale)).map_err(|_| BakeError::NotFinite { sky: e.name.clone(), index: i, u: i, v: r, what: "ambient light" })?;
+                let h = rgba16f::pack_signed(v.map(|c| c * scale)).map_err(|_| BakeError::NotFinite {
+                    sky: e.name.clone(),
+                    index: i,
+                    u: i,
+                    v: r,
+                    what: "ambient light",
+                })?;
                 halves.push(h);
             }
         }
@@ -63,7 +76,14 @@ pub fn write_ambient(entries: &[SkyEntry], colour: ColourSpace, dir: &Path) -> R
         scale_log2: scales,
     };
     let json = serde_json::to_string(&entry).expect("an entry always serialises");
-    let tex = ArrayTexture { width: entry.width as u32, height: entry.height as u32, layers: entries.len() as u32, colour_space: colour, texels: Texels::Rgba16f(&halves), sky_json: &json };
+    let tex = ArrayTexture {
+        width: entry.width as u32,
+        height: entry.height as u32,
+        layers: entries.len() as u32,
+        colour_space: colour,
+        texels: Texels::Rgba16f(&halves),
+        sky_json: &json,
+    };
     entry.bytes = ktx2::write(&dir.join(&entry.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
     Ok(Some(entry))
 }

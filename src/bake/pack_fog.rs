@@ -13,7 +13,7 @@
 use super::pack::slice_scale_log2;
 use super::run::SkySlices;
 use super::BakeError;
-use crate::lut::colour::ColourSpace;
+use crate::colour::ColourSpace;
 use crate::lut::fog::ATTENUATION_SIZE;
 use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
 use crate::lut::manifest::{AttenuationEntry, FogEntry, FogSkyEntry};
@@ -50,18 +50,25 @@ pub fn pack_fog(skies: &[SkySlices], colour: ColourSpace) -> Result<Option<Packe
                 let scale = (scale_log2 as f64).exp2();
                 let scaled: Vec<[f64; 3]> = rgb.iter().map(|p| p.map(|c| c * scale)).collect();
                 let what = if which == 0 { "fog RGB" } else { "shadowed fog RGB" };
-                let (packed, _) = rgba16f::pack_array(&scaled).map_err(|e| BakeError::NotFinite { sky: s.sky.name.clone(), index, u: e.texel % settings.width, v: e.texel / settings.width, what })?;
+                let (packed, _) = rgba16f::pack_array(&scaled).map_err(|e| BakeError::NotFinite {
+                    sky: s.sky.name.clone(),
+                    index,
+                    u: e.texel % settings.width,
+                    v: e.texel / settings.width,
+                    what,
+                })?;
                 fog_texels.extend(packed);
                 scales[which].push(scale_log2);
             }
         }
-        let (packed, _) = rgba16f::pack_array(&f.extras.attenuation.channel_texels(&m)).map_err(|e| BakeError::NotFinite {
-            sky: s.sky.name.clone(),
-            index: 0,
-            u: e.texel % ATTENUATION_SIZE,
-            v: e.texel / ATTENUATION_SIZE,
-            what: "attenuation",
-        })?;
+        let (packed, _) =
+            rgba16f::pack_array(&f.extras.attenuation.channel_texels(&m)).map_err(|e| BakeError::NotFinite {
+                sky: s.sky.name.clone(),
+                index: 0,
+                u: e.texel % ATTENUATION_SIZE,
+                v: e.texel / ATTENUATION_SIZE,
+                what: "attenuation",
+            })?;
         attenuation_texels.extend(packed);
         let [fog_scale_log2, shadowed_scale_log2] = scales;
         entries.push(FogSkyEntry {
@@ -117,13 +124,29 @@ impl PackedFog {
     /// temporary file and a rename) and returns the manifest entry.
     pub fn write(self, colour: ColourSpace, dir: &Path) -> Result<FogEntry, BakeError> {
         let mut e = self.entry;
-        let json = serde_json::to_string(&FogEntry { skies: Vec::new(), ..e.clone() }).expect("an entry always serialises");
-        let tex = ArrayTexture { width: e.width as u32, height: e.height as u32, layers: e.layers as u32, colour_space: colour, texels: Texels::Rgba16f(&self.fog), sky_json: &json };
+        let json =
+            serde_json::to_string(&FogEntry { skies: Vec::new(), ..e.clone() }).expect("an entry always serialises");
+        let tex = ArrayTexture {
+            width: e.width as u32,
+            height: e.height as u32,
+            layers: e.layers as u32,
+            colour_space: colour,
+            texels: Texels::Rgba16f(&self.fog),
+            sky_json: &json,
+        };
         e.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
         let a = &e.attenuation;
         let json = serde_json::to_string(a).expect("an entry always serialises");
-        let tex = ArrayTexture { width: a.width as u32, height: a.height as u32, layers: a.layers.len() as u32, colour_space: colour, texels: Texels::Rgba16f(&self.attenuation), sky_json: &json };
-        e.attenuation.bytes = ktx2::write(&dir.join(&e.attenuation.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+        let tex = ArrayTexture {
+            width: a.width as u32,
+            height: a.height as u32,
+            layers: a.layers.len() as u32,
+            colour_space: colour,
+            texels: Texels::Rgba16f(&self.attenuation),
+            sky_json: &json,
+        };
+        e.attenuation.bytes =
+            ktx2::write(&dir.join(&e.attenuation.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
         Ok(e)
     }
 }

@@ -9,8 +9,8 @@
 
 use super::run::BakeOptions;
 use super::{BakeEvent, BakeProgress, BakeSink};
-use crate::farm::coordinator::Options;
-use crate::farm::events::{EventSink, FarmEvent};
+use crate::session::farm::Options;
+use crate::session::farm::{EventSink, FarmEvent};
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
@@ -49,7 +49,11 @@ impl Tracker {
     /// A bake of `texels_total` texels to render in `slices_total` slices,
     /// `slices_cached` of them in the cache, on `cores` (known from the
     /// start, or from the farm workers' Hello), reporting to `sink`.
-    pub(super) fn new((texels_total, slices_total, slices_cached): (u64, usize, usize), (cores, cores_known): (usize, bool), sink: Option<BakeSink>) -> Tracker {
+    pub(super) fn new(
+        (texels_total, slices_total, slices_cached): (u64, usize, usize),
+        (cores, cores_known): (usize, bool),
+        sink: Option<BakeSink>,
+    ) -> Tracker {
         Tracker {
             start: Instant::now(),
             texels_total,
@@ -85,16 +89,39 @@ impl Tracker {
         self.planning = false;
         self.forecast_total = Some(total);
         // Pilots and probes render on this process's threads.
-        self.emit(BakeEvent::Forecast { from, core_seconds: total, samples, planning_core_seconds: planning_s * rayon::current_num_threads() as f64, saved });
+        self.emit(BakeEvent::Forecast {
+            from,
+            core_seconds: total,
+            samples,
+            planning_core_seconds: planning_s * rayon::current_num_threads() as f64,
+            saved,
+        });
     }
 
     /// One more pilot or probe (`from`) rendered, of slice `index` of
     /// `sky` (a fog slice's if `fog`): `done` of `total`, planning having
     /// begun at `start`; a pilot's `forecast` of its slice's core-seconds.
-    pub(super) fn planned_one(&self, from: &'static str, start: Instant, (sky, index, fog): (&str, usize, bool), (done, total): (usize, usize), forecast: Option<f64>) {
+    pub(super) fn planned_one(
+        &self,
+        from: &'static str,
+        start: Instant,
+        (sky, index, fog): (&str, usize, bool),
+        (done, total): (usize, usize),
+        forecast: Option<f64>,
+    ) {
         let elapsed_s = start.elapsed().as_secs_f64();
         let eta_s = elapsed_s * total.saturating_sub(done) as f64 / done.max(1) as f64;
-        self.emit(BakeEvent::Planning { from, sky: sky.to_string(), index, fog, done, total, elapsed_s, eta_s, forecast_core_seconds: forecast });
+        self.emit(BakeEvent::Planning {
+            from,
+            sky: sky.to_string(),
+            index,
+            fog,
+            done,
+            total,
+            elapsed_s,
+            eta_s,
+            forecast_core_seconds: forecast,
+        });
     }
 
     /// The queue `job` starts, its first `resumed_texels` taken from the
@@ -147,10 +174,21 @@ impl Tracker {
             _ => {
                 let rendered = texels_done.saturating_sub(self.resumed_texels);
                 let to_render = self.texels_total.saturating_sub(self.resumed_texels);
-                (rendered * 100 >= to_render && rendered > 0).then(|| render_s * (self.texels_total - texels_done) as f64 / rendered as f64)
+                (rendered * 100 >= to_render && rendered > 0)
+                    .then(|| render_s * (self.texels_total - texels_done) as f64 / rendered as f64)
             }
         };
-        BakeProgress { elapsed_s, texels_done, texels_total: self.texels_total, slices_done: self.slices_done, slices_total: self.slices_total, eta_s, sky, index, stalled }
+        BakeProgress {
+            elapsed_s,
+            texels_done,
+            texels_total: self.texels_total,
+            slices_done: self.slices_done,
+            slices_total: self.slices_total,
+            eta_s,
+            sky,
+            index,
+            stalled,
+        }
     }
 }
 
@@ -214,7 +252,8 @@ pub(super) fn farm_options(opts: &BakeOptions, tracker: &Arc<Mutex<Tracker>>) ->
                 // The farm's threads, once a worker said its own: what the
                 // forecast's core-seconds are shared among, a worker yet to
                 // say counted at the others' mean.
-                let serving: Vec<usize> = p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).collect();
+                let serving: Vec<usize> =
+                    p.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).collect();
                 let known: Vec<usize> = serving.iter().copied().filter(|&n| n > 0).collect();
                 if !known.is_empty() {
                     let sum: usize = known.iter().sum();
@@ -243,7 +282,10 @@ mod tests {
     fn resumed_bake(resumed_texels: u64) -> Tracker {
         let mut t = Tracker::new((200, 2, 0), (2, true), None);
         t.forecast_total = Some(100.0);
-        t.start_queue(QueueJob::new(vec![("clear".into(), 0, 100), ("clear".into(), 1, 100)], &[50.0, 50.0]), resumed_texels);
+        t.start_queue(
+            QueueJob::new(vec![("clear".into(), 0, 100), ("clear".into(), 1, 100)], &[50.0, 50.0]),
+            resumed_texels,
+        );
         t
     }
 

@@ -7,8 +7,8 @@ use super::{usage, EXIT_INVALID};
 use anyhow::Result;
 use indicatif::{ProgressBar, ProgressStyle};
 use sky::bake::{self, BakeEvent, BakeFile, BakeOptions, BakeSink, Quality, SliceCache, SliceId};
+use sky::colour::ColourSpace;
 use sky::farm::coordinator::{Options, WorkerSpec};
-use sky::lut::colour::ColourSpace;
 use sky::mie::MieCache;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -30,8 +30,8 @@ pub struct BakeArgs {
     /// Quality preset of the bake file
     #[arg(long, value_enum, default_value = "draft")]
     quality: QualityArg,
-    /// Linear RGB space of the textures (the manifest records its matrix)
-    #[arg(long, value_enum, default_value = "rec709")]
+    /// Linear RGB space of the textures: rec709, rec2020, acescg or xyz (the manifest records its matrix)
+    #[arg(long, default_value = "rec709", value_parser = parse_colour_space)]
     colour_space: ColourSpace,
     /// The slice cache (default: OUT/cache)
     #[arg(long, value_name = "DIR")]
@@ -107,7 +107,9 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                 ));
                 if style == Style::Bars && *texels_to_render > 0 {
                     let b = ProgressBar::new(*texels_to_render);
-                    b.set_style(ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} texels  {msg}").unwrap());
+                    b.set_style(
+                        ProgressStyle::with_template("{bar:40} {percent:>3}% {pos}/{len} texels  {msg}").unwrap(),
+                    );
                     *bar.lock().unwrap() = Some(b);
                 }
             }
@@ -117,11 +119,19 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                 }
             }
             BakeEvent::Forecast { from, core_seconds, samples, planning_core_seconds, saved } => {
-                let saved = if *saved > 0 { format!("; {saved} of them saved in the cache folder by an earlier run") } else { String::new() };
+                let saved = if *saved > 0 {
+                    format!("; {saved} of them saved in the cache folder by an earlier run")
+                } else {
+                    String::new()
+                };
                 say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them{saved})", core_seconds / 3600.0, planning_core_seconds / 3600.0));
             }
             BakeEvent::Planning { from, sky, index, fog, done, total, elapsed_s, eta_s, .. } => {
-                let what = format!("planning: {from} {done}/{total} ({sky}:{}{index}), ETA {}", if *fog { "fog:" } else { "" }, fmt_duration(*eta_s));
+                let what = format!(
+                    "planning: {from} {done}/{total} ({sky}:{}{index}), ETA {}",
+                    if *fog { "fog:" } else { "" },
+                    fmt_duration(*eta_s)
+                );
                 match style {
                     Style::Bars => {
                         if let Some(b) = bar.lock().unwrap().as_ref() {
@@ -180,16 +190,32 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                     b.set_message(format!("{sky}: fog {done}/{total}"));
                 }
             }
-            BakeEvent::FogDone { sky, slices_rendered, slices_cached, core_seconds, falloff_a, falloff_p, fit_median, fit_p99 } => {
+            BakeEvent::FogDone {
+                sky,
+                slices_rendered,
+                slices_cached,
+                core_seconds,
+                falloff_a,
+                falloff_p,
+                fit_median,
+                fit_p99,
+            } => {
                 say(format!(
                     "sky bake-luts: {sky}: fog and shadowed fog: {slices_rendered} slices rendered ({core_seconds:.1} core-s), {slices_cached} from the cache; falloff a = {falloff_a:.3}, p = {falloff_p:.3} (fit error median {:.1} %, p99 {:.1} %)",
                     100.0 * fit_median,
                     100.0 * fit_p99
                 ));
             }
-            BakeEvent::Farm { sky, index, farm } => say(format!("sky bake-luts: {sky}:{index}: {}", serde_json::to_string(farm).unwrap_or_default())),
+            BakeEvent::Farm { sky, index, farm } => {
+                say(format!("sky bake-luts: {sky}:{index}: {}", serde_json::to_string(farm).unwrap_or_default()))
+            }
         }
     })
+}
+
+/// `--colour-space`: one of [`ColourSpace::ALL`] by its name.
+fn parse_colour_space(s: &str) -> Result<ColourSpace, String> {
+    s.parse().map_err(|e: sky::colour::UnknownColourSpace| e.to_string())
 }
 
 /// The bake file at `path`, or None after printing its located errors
@@ -215,7 +241,8 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         Some(plan) => plan,
         None => (vec![WorkerSpec::Local { threads }], Options::default()),
     };
-    let cores = workers.iter().map(|w| if let WorkerSpec::Local { threads } = w { *threads } else { 0 }).sum::<usize>().max(1);
+    let cores =
+        workers.iter().map(|w| if let WorkerSpec::Local { threads } = w { *threads } else { 0 }).sum::<usize>().max(1);
     let cache_dir = a.cache.clone().unwrap_or_else(|| a.out.join("cache"));
     let cache = match SliceCache::open(&cache_dir) {
         Ok(c) => c,
@@ -226,7 +253,16 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     };
     let style = Style::choose(a.json_progress);
     let bar = Arc::new(Mutex::new(None));
-    let opts = BakeOptions { quality, cache, workers, farm, cores, only: (!a.slice.is_empty()).then(|| a.slice.clone()), pack_only: a.pack_only, events: Some(sink(style, bar.clone())) };
+    let opts = BakeOptions {
+        quality,
+        cache,
+        workers,
+        farm,
+        cores,
+        only: (!a.slice.is_empty()).then(|| a.slice.clone()),
+        pack_only: a.pack_only,
+        events: Some(sink(style, bar.clone())),
+    };
     let cancel = Arc::new(AtomicBool::new(false));
     {
         let c = cancel.clone();
@@ -238,14 +274,6 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     if let Some(b) = bar.lock().unwrap().take() {
         b.finish_and_clear();
     }
-    // A failed bake: the error on stderr and, with --json, in the summary.
-    let failed = |e: &dyn std::fmt::Display| {
-        eprintln!("sky bake-luts: {e}");
-        if a.json {
-            outln!("{}", serde_json::json!({ "manifest": null, "quality": quality.name(), "errors": [e.to_string()] }));
-        }
-        Ok(ExitCode::from(EXIT_INVALID))
-    };
     let skies = match result {
         Ok(s) => s,
         Err(e) if e.is_cancelled() => {
@@ -255,15 +283,9 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
             );
             return Ok(ExitCode::from(130));
         }
-        Err(e) => return failed(&e),
+        Err(e) => return failed(a.json, quality, &e),
     };
-    // The sky's slices and the fog's, rendered now (a whole bake's fog, or
-    // the fog slices a part of a bake names).
-    let rendered: usize = skies.iter().map(|s| s.rendered + s.fog.as_ref().map_or(0, |f| f.rendered) + s.fog_rendered.len()).sum();
-    let fog_core_s: f64 = skies.iter().map(|s| s.fog.as_ref().map_or(0.0, |f| f.core_seconds) + s.fog_rendered.iter().map(|(_, f)| f.core_seconds).sum::<f64>()).sum();
-    // (+ 0.0: an empty sum is −0.0, which would print as "-0.000")
-    let core_s: f64 = skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum::<f64>() + fog_core_s + 0.0;
-    eprintln!("sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.3} core-hours when rendered", started.elapsed().as_secs_f64(), core_s / 3600.0);
+    let rendered = report_rendered(&skies, started);
     if !a.slice.is_empty() {
         // A part of a bake (a farm manager's task) fills the cache only.
         if a.json {
@@ -271,24 +293,79 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
                 .iter()
                 .flat_map(|s| s.slices.iter().enumerate().filter_map(move |(i, r)| r.as_ref().map(|r| (s, i, r))))
                 .map(|(s, i, r)| slice_json(format!("{}:{i}", s.sky.name), r))
-                .chain(skies.iter().flat_map(|s| s.fog_rendered.iter().map(move |(i, r)| slice_json(format!("{}:fog:{i}", s.sky.name), r))))
+                .chain(skies.iter().flat_map(|s| {
+                    s.fog_rendered.iter().map(move |(i, r)| slice_json(format!("{}:fog:{i}", s.sky.name), r))
+                }))
                 .collect();
             outln!("{}", serde_json::json!({ "slices": slices, "rendered": rendered, "cache": opts.cache.dir() }));
         }
         return Ok(ExitCode::SUCCESS);
     }
-    let (manifest, stats) = match bake::pack::write_bake(&skies, quality.name(), a.colour_space, &a.out) {
+    pack(&a, &skies, quality)
+}
+
+/// A failed bake: the error on stderr and, with --json, in the summary.
+fn failed(json: bool, quality: Quality, e: &dyn std::fmt::Display) -> Result<ExitCode> {
+    eprintln!("sky bake-luts: {e}");
+    if json {
+        outln!("{}", serde_json::json!({ "manifest": null, "quality": quality.name(), "errors": [e.to_string()] }));
+    }
+    Ok(ExitCode::from(EXIT_INVALID))
+}
+
+/// Says on stderr how many slices were rendered and what they cost;
+/// returns how many.
+fn report_rendered(skies: &[bake::SkySlices], started: Instant) -> usize {
+    // The sky's slices and the fog's, rendered now (a whole bake's fog, or
+    // the fog slices a part of a bake names).
+    let rendered: usize =
+        skies.iter().map(|s| s.rendered + s.fog.as_ref().map_or(0, |f| f.rendered) + s.fog_rendered.len()).sum();
+    let fog_core_s: f64 = skies
+        .iter()
+        .map(|s| {
+            s.fog.as_ref().map_or(0.0, |f| f.core_seconds)
+                + s.fog_rendered.iter().map(|(_, f)| f.core_seconds).sum::<f64>()
+        })
+        .sum();
+    // (+ 0.0: an empty sum is −0.0, which would print as "-0.000")
+    let core_s: f64 =
+        skies.iter().flat_map(|s| s.slices.iter().flatten()).map(|s| s.core_seconds).sum::<f64>() + fog_core_s + 0.0;
+    eprintln!(
+        "sky bake-luts: {rendered} slices rendered in {:.1} s; the slices cost {:.3} core-hours when rendered",
+        started.elapsed().as_secs_f64(),
+        core_s / 3600.0
+    );
+    rendered
+}
+
+/// Packs the rendered skies into the LUT files and manifest.json in --out,
+/// and reports them (on stderr; with --json, the summary on stdout).
+fn pack(a: &BakeArgs, skies: &[bake::SkySlices], quality: Quality) -> Result<ExitCode> {
+    let (manifest, stats) = match bake::pack::write_bake(skies, quality.name(), a.colour_space, &a.out) {
         Ok(m) => m,
-        Err(e) => return failed(&e),
+        Err(e) => return failed(a.json, quality, &e),
     };
     let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
     for (e, st) in manifest.skies.iter().zip(&stats) {
         eprintln!(
             "sky bake-luts: {:<8} {} ({} bytes, {}x{}x{}), {} texels clamped, {} denormal, {} with negative RGB",
-            e.name, e.file, e.bytes, e.width, e.height, e.layers, st.clamped_texels, st.denormal_texels, e.texels_negative_rgb
+            e.name,
+            e.file,
+            e.bytes,
+            e.width,
+            e.height,
+            e.layers,
+            st.clamped_texels,
+            st.denormal_texels,
+            e.texels_negative_rgb
         );
     }
-    eprintln!("sky bake-luts: {} files, {:.2} MiB, and {}", manifest.skies.len(), total_bytes as f64 / 1048576.0, a.out.join("manifest.json").display());
+    eprintln!(
+        "sky bake-luts: {} files, {:.2} MiB, and {}",
+        manifest.skies.len(),
+        total_bytes as f64 / 1048576.0,
+        a.out.join("manifest.json").display()
+    );
     if let Some(f) = &manifest.fog {
         eprintln!(
             "sky bake-luts: global fog: {} ({} bytes, {}x{}x{}: Fog and Shadowed Fog of every sky) and {} ({} bytes, {}x{}x{})",
@@ -319,7 +396,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
         let skies_json: Vec<_> = manifest
             .skies
             .iter()
-            .zip(&skies)
+            .zip(skies)
             .zip(&stats)
             .map(|((e, s), st)| {
                 let cost: Vec<f64> = s.slices.iter().flatten().map(|x| x.core_seconds).collect();
@@ -369,24 +446,34 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
             Err(_) => "sky".to_string(),
         },
     };
-    let defaults = bake::openjd::PlanDefaults { sky_executable, bake_file: within(&bake_path), out_dir: ".".into(), cache_dir: within(&cache), quality, colour_space: a.colour_space };
+    let defaults = bake::openjd::PlanDefaults {
+        sky_executable,
+        bake_file: within(&bake_path),
+        out_dir: ".".into(),
+        cache_dir: within(&cache),
+        quality,
+        colour_space: a.colour_space,
+    };
     let stem = bake_path.file_stem().map_or("bake".into(), |s| s.to_string_lossy().into_owned());
     let text = bake::openjd::job_template(bake, &format!("sky bake-luts {stem}"), &defaults);
     let path = out.join(bake::openjd::TEMPLATE_FILE);
-    if let Err(e) = sky::lut::atomic::write_atomically(&path, text.as_bytes()) {
+    if let Err(e) = sky::atomic::write_atomically(&path, text.as_bytes()) {
         return fail(format!("cannot write {}: {e}", path.display()));
     }
     // This machine's values of the path parameters, for `openjd run -p file://...`.
     let params = serde_json::json!({ "BakeFile": bake_path, "OutDir": out, "CacheDir": cache });
     let params_path = out.join(bake::openjd::PARAMS_FILE);
-    if let Err(e) = sky::lut::atomic::write_atomically(&params_path, format!("{params:#}\n").as_bytes()) {
+    if let Err(e) = sky::atomic::write_atomically(&params_path, format!("{params:#}\n").as_bytes()) {
         return fail(format!("cannot write {}: {e}", params_path.display()));
     }
     let tasks = bake::openjd::render_tasks(bake).len();
     eprintln!("sky bake-luts: {} (Open Job Description): {tasks} render tasks, one per sky slice and one per fog slice, then a pack step", path.display());
     eprintln!("sky bake-luts: check it with `openjd check {}`; run it here with `openjd run {} -p file://{} --step Pack --run-dependencies`", path.display(), path.display(), params_path.display());
     if a.json {
-        outln!("{}", serde_json::json!({ "plan": "openjd", "template": path, "parameters": params_path, "render_tasks": tasks, "quality": quality.name(), "cache": cache }));
+        outln!(
+            "{}",
+            serde_json::json!({ "plan": "openjd", "template": path, "parameters": params_path, "render_tasks": tasks, "quality": quality.name(), "cache": cache })
+        );
     }
     Ok(ExitCode::SUCCESS)
 }

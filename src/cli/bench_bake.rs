@@ -1,11 +1,11 @@
 //! `sky bench bake`: the projected cost of a final bake, per basis sky and
 //! estimator, measured on a few slices against converged references (the
-//! measurement itself is `sky::bake::bench`).
+//! measurement itself is `sky::study::bench`).
 
 use super::{usage, EXIT_INVALID};
 use anyhow::Result;
-use sky::bake::bench::{self, BenchOptions, SliceCost};
 use sky::render::SingleScatter;
+use sky::study::bench::{self, BenchOptions, SliceCost};
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
@@ -100,7 +100,12 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         methods: if a.fog {
             vec![SingleScatter::Quadrature]
         } else {
-            a.methods.iter().map(|m| if *m == MethodArg::Quadrature { SingleScatter::Quadrature } else { SingleScatter::MonteCarlo }).collect()
+            a.methods
+                .iter()
+                .map(
+                    |m| if *m == MethodArg::Quadrature { SingleScatter::Quadrature } else { SingleScatter::MonteCarlo },
+                )
+                .collect()
         },
         threads,
         fog: a.fog,
@@ -111,7 +116,9 @@ pub fn run(a: BenchBakeArgs) -> Result<ExitCode> {
         return usage("--coarse-ms-grid: at least 2 rows and 2 columns");
     }
     if a.coarse_ms && a.stride[0] * a.stride[1] < 2 {
-        return usage("--coarse-ms interpolates from every --stride-th texel: --stride must exceed 1 in at least one axis");
+        return usage(
+            "--coarse-ms interpolates from every --stride-th texel: --stride must exceed 1 in at least one axis",
+        );
     }
     if !a.json {
         let what = if a.fog { "fog slices (the Shadowed Fog's render, the Fog's quadrature)" } else { "sky slices" };

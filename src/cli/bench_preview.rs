@@ -32,6 +32,7 @@ pub fn run(_a: BenchPreviewArgs) -> Result<ExitCode> {
 pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
     use super::{usage, EXIT_INVALID};
     use anyhow::Context;
+    use sky::directions::camera::Camera;
     use sky::lut::decode::pixel_directions;
     use sky::preview::cloud_coverage::default_coverage;
     use sky::preview::clouds::{Amortisation, CloudSettings, Clouds};
@@ -40,7 +41,6 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
     use sky::preview::landscape::{Ground, LandscapePass};
     use sky::preview::plain_pass::PlainPass;
     use sky::preview::sky_pass::{SkyPass, Weather};
-    use sky::render::camera::Camera;
 
     let (w, h) = a.size;
     if w == 0 || h == 0 || a.frames == 0 {
@@ -50,7 +50,10 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
     let gpu = match Gpu::new() {
         Ok(g) if g.has_timestamps() => g,
         Ok(g) => {
-            eprintln!("sky bench preview: {} has no timestamp queries, which the benchmark times passes by", g.describe());
+            eprintln!(
+                "sky bench preview: {} has no timestamp queries, which the benchmark times passes by",
+                g.describe()
+            );
             return Ok(ExitCode::from(EXIT_INVALID));
         }
         Err(e) => {
@@ -59,14 +62,16 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
         }
     };
     let sky = SkyPass::new(&gpu, &luts).context("preparing the sky pass")?;
-    let plain = PlainPass::new(&gpu, sky.array(0).expect("SkyPass::new checked a sky").clone()).context("preparing the plain pass")?;
+    let plain = PlainPass::new(&gpu, sky.array(0).expect("SkyPass::new checked a sky").clone())
+        .context("preparing the plain pass")?;
     let landscape = match luts.manifest.fog {
         Some(_) => Some(LandscapePass::new(&gpu, &luts).context("preparing the landscape")?),
         None => None,
     };
     let dirs = pixel_directions(&Camera::Pinhole { azimuth_deg: 0.0, elevation_deg: 10.0, fov_deg: 90.0 }, w, h);
     // Three basis skies blended, the most the sky pass reads.
-    let weather = Weather { sun_elevation_deg: 20.0, sun_azimuth_deg: 30.0, haziness: 0.3, cloudiness: 0.1, sun_disk: true };
+    let weather =
+        Weather { sun_elevation_deg: 20.0, sun_azimuth_deg: 30.0, haziness: 0.3, cloudiness: 0.1, sun_disk: true };
     let ground = Ground { albedo: 0.15, cloud_occlusion: 0.5 };
     // The clouds as `sky preview` makes them by default: a 256^2 G-buffer,
     // 4 marches a texel, each spread over 8 frames.
@@ -102,7 +107,8 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
     steps.sort_by(f64::total_cmp);
     let step = steps[steps.len() / 2];
     if a.json {
-        let passes: serde_json::Map<String, serde_json::Value> = medians.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect();
+        let passes: serde_json::Map<String, serde_json::Value> =
+            medians.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect();
         outln!(
             "{}",
             serde_json::json!({ "adapter": gpu.describe(), "width": w, "height": h, "frames": a.frames, "median_pass_seconds": passes, "sky_over_plain": ratio, "cloud_gbuffer_whole_seconds": whole, "cloud_gbuffer_step_seconds": step })

@@ -51,7 +51,11 @@ pub fn farm_plan(a: &FarmArgs) -> Result<Option<(Vec<WorkerSpec>, Options)>> {
         Some(p) => config::read_token(&p).map_err(anyhow::Error::msg)?,
         None => match std::env::var("SKY_FARM_TOKEN") {
             Ok(t) if !t.trim().is_empty() => t.trim().to_string(),
-            _ => return usage("a farm needs its token: --token-file FILE, token_file in the farm file, or SKY_FARM_TOKEN"),
+            _ => {
+                return usage(
+                    "a farm needs its token: --token-file FILE, token_file in the farm file, or SKY_FARM_TOKEN",
+                )
+            }
         },
     });
     let (ca, domain) = match (&a.tls_ca, file.as_ref().and_then(|f| f.tls.clone())) {
@@ -61,7 +65,8 @@ pub fn farm_plan(a: &FarmArgs) -> Result<Option<(Vec<WorkerSpec>, Options)>> {
     };
     if let Some(ca) = &ca {
         let pem = std::fs::read(ca).with_context(|| format!("--tls-ca {}", ca.display()))?;
-        let mut tls = tonic::transport::ClientTlsConfig::new().ca_certificate(tonic::transport::Certificate::from_pem(pem));
+        let mut tls =
+            tonic::transport::ClientTlsConfig::new().ca_certificate(tonic::transport::Certificate::from_pem(pem));
         if let Some(d) = domain {
             tls = tls.domain_name(d);
         }

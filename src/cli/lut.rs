@@ -4,8 +4,8 @@
 use super::{usage, EXIT_INVALID};
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
+use sky::directions::camera::{direction_deg, Camera};
 use sky::lut::decode::Luts;
-use sky::render::camera::{direction_deg, Camera};
 use sky::render::{output, Image, PixelResult};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -13,16 +13,20 @@ use std::process::ExitCode;
 #[derive(Subcommand, Debug)]
 pub enum LutCommand {
     /// The decoded sky toward one direction: XYZ and RGB
-    #[command(after_help = "Example:\n  sky lut sample luts/manifest.json --sun-elevation-deg 12 --haziness 0.3 --cloudiness 0 --direction 60,180")]
+    #[command(
+        after_help = "Example:\n  sky lut sample luts/manifest.json --sun-elevation-deg 12 --haziness 0.3 --cloudiness 0 --direction 60,180"
+    )]
     Sample(SampleArgs),
     /// A whole sky decoded from the LUTs, to OpenEXR (XYZ) and PNG
-    #[command(after_help = "Example:\n  sky lut decode luts/manifest.json --sun-elevation-deg 12 --camera fisheye --size 256x256 --out sky.exr --png sky.png")]
+    #[command(
+        after_help = "Example:\n  sky lut decode luts/manifest.json --sun-elevation-deg 12 --camera fisheye --size 256x256 --out sky.exr --png sky.png"
+    )]
     Decode(DecodeArgs),
     /// The decoder against direct renders: luminance and colour error, PSNR, the error's sources, the twilight curve
     #[command(
         after_help = "Example:\n  sky lut verify luts/manifest.json --bake bakes/basis-skies.toml --plot luts/verify\n\nRenders references at the sun elevations between slices 41.7, 23.3, 8.2, 3.1, 0.4, -2.7, -7.5 degrees and at six slice centres, over a lattice of directions above the horizon."
     )]
-    Verify(VerifyArgs),
+    Verify(super::lut_verify::VerifyArgs),
     /// What the LUT mappings lose by interpolating, on an atmosphere's noise-free single-scattering sky; the threshold between the two direction mappings, measured
     #[command(
         after_help = "Example:\n  sky lut interpolation atmospheres/clear.toml --size 32x128\n\nBakes the single-scattering sky (no noise) in memory through the LUT mappings and decodes it with the reference decoder: direction interpolation at every slice from 60 deg sun zenith to the horizon in both direction mappings, slice interpolation between slices, and the twilight's largest step."
@@ -33,33 +37,6 @@ pub enum LutCommand {
         after_help = "Example:\n  sky lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot out/fog\n\nRenders the fog (the light the air below the ceiling scatters toward the camera in front of a black object) toward 7 elevations x 3 azimuths at 8 depths from 0.002 to 1 of the distance to the ceiling, for each sun, and fits Fog(x) = LUT (1 - exp(-a theta^p x)) / (1 - exp(-a theta^p)) in relative error."
     )]
     FogFalloff(super::lut_fog::FogFalloffArgs),
-}
-
-#[derive(Args, Debug)]
-pub struct VerifyArgs {
-    /// The bake's manifest.json
-    manifest: PathBuf,
-    /// The bake file it was baked from (for the atmospheres)
-    #[arg(long, value_name = "BAKE.toml")]
-    bake: PathBuf,
-    /// The bake's slice cache, for the quantisation error (default: next to the manifest)
-    #[arg(long, value_name = "DIR")]
-    cache: Option<PathBuf>,
-    /// Directions of the lattice above the horizon
-    #[arg(long, default_value_t = 400)]
-    directions: usize,
-    /// Samples per reference direction
-    #[arg(long, default_value_t = 256)]
-    spp: u32,
-    /// Samples per direction of the fog's references (15 directions x 30 renders per basis sky; fog near the camera is faint and its light scattered more than once is noisy)
-    #[arg(long, default_value_t = 4096)]
-    fog_spp: u32,
-    /// Twilight curves (PNG, one per basis sky) into this folder
-    #[arg(long, value_name = "DIR")]
-    plot: Option<PathBuf>,
-    /// Print JSON
-    #[arg(long)]
-    json: bool,
 }
 
 /// The weather and the sun, as a runtime gives them.
@@ -144,7 +121,11 @@ impl ViewArgs {
         Ok(match self.camera {
             CameraKind::Fisheye => Camera::Fisheye,
             CameraKind::Equirect => Camera::Equirect,
-            CameraKind::Pinhole => Camera::Pinhole { azimuth_deg: self.look_azimuth_deg, elevation_deg: self.look_elevation_deg, fov_deg: self.fov_deg },
+            CameraKind::Pinhole => Camera::Pinhole {
+                azimuth_deg: self.look_azimuth_deg,
+                elevation_deg: self.look_elevation_deg,
+                fov_deg: self.fov_deg,
+            },
         })
     }
 }
@@ -219,245 +200,148 @@ pub(super) fn load(manifest: &std::path::Path) -> Option<Luts> {
 
 pub fn run(c: LutCommand) -> Result<ExitCode> {
     match c {
-        LutCommand::Sample(a) => {
-            check(&a.conditions)?;
-            let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
-            let c = &a.conditions;
-            let d = direction_deg(a.direction.0, a.direction.1);
-            let rgb = luts.sample(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
-            let xyz = luts.sample_xyz(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
-            let space = &luts.manifest.colour.space;
-            // The sun the sky texture leaves out (bakes with a transmittance file).
-            let sun = luts.sun(c.sun_elevation_deg, c.haziness, c.cloudiness);
-            let ambient = luts.ambient(c.sun_elevation_deg, c.haziness, c.cloudiness);
-            if let Some(depth) = a.depth_m {
-                if !(depth >= 0.0 && depth.is_finite() && (0.0..=1.0).contains(&a.cloud_occlusion)) {
-                    return usage(format!("--depth-m must be a distance of 0 m or more and --cloud-occlusion between 0 and 1, got {depth} and {}", a.cloud_occlusion));
-                }
-                if luts.fog.is_none() {
-                    eprintln!("{}: this bake has no fog LUTs (bake it again with this version of sky)", a.manifest.display());
-                    return Ok(ExitCode::from(EXIT_INVALID));
-                }
-            }
-            let fog = a.depth_m.and_then(|m| luts.fog(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d, m / 1000.0, a.cloud_occlusion));
-            if a.json {
-                outln!("{}", serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun, "ambient": ambient, "fog": fog }));
-            } else {
-                outln!("XYZ {:.6e} {:.6e} {:.6e}  (Y in cd/m^2)", xyz[0], xyz[1], xyz[2]);
-                outln!("RGB {:.6e} {:.6e} {:.6e}  (linear {space})", rgb[0], rgb[1], rgb[2]);
-                if let Some(s) = sun {
-                    let (e, l) = (s.irradiance_rgb, s.disk_radiance_rgb);
-                    outln!("sun irradiance RGB {:.6e} {:.6e} {:.6e}  (on a surface facing it; lux-like units)", e[0], e[1], e[2]);
-                    outln!("sun disk radiance RGB {:.6e} {:.6e} {:.6e}  (a disk {:.4} deg across)", l[0], l[1], l[2], s.angular_diameter_deg);
-                }
-                if let Some(am) = ambient {
-                    let (e, l) = (am.irradiance_up, am.mean_radiance);
-                    outln!("sky irradiance on an upward surface RGB {:.6e} {:.6e} {:.6e}; mean sky radiance {:.6e} {:.6e} {:.6e}", e[0], e[1], e[2], l[0], l[1], l[2]);
-                }
-                if let Some(f) = fog {
-                    let (l, t) = (f.inscatter_rgb, f.attenuation_rgb);
-                    outln!(
-                        "fog in front of an object at {} m ({:.4} of the way to the fog's ceiling): in-scattered RGB {:.6e} {:.6e} {:.6e}, attenuation RGB {:.6} {:.6} {:.6}",
-                        a.depth_m.unwrap_or(0.0),
-                        f.normalised_depth,
-                        l[0],
-                        l[1],
-                        l[2],
-                        t[0],
-                        t[1],
-                        t[2]
-                    );
-                }
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        LutCommand::Verify(a) => verify(a),
+        LutCommand::Sample(a) => sample(a),
+        LutCommand::Verify(a) => super::lut_verify::run(a),
         LutCommand::Interpolation(a) => super::lut_interpolation::run(a),
         LutCommand::FogFalloff(a) => super::lut_fog::run(a),
-        LutCommand::Decode(a) => {
-            check(&a.conditions)?;
-            let camera = a.view.camera()?;
-            let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
-            let c = &a.conditions;
-            let (w, h) = a.size;
-            if a.landscape {
-                if !(0.0..=1.0).contains(&a.cloud_occlusion) {
-                    return usage(format!("--cloud-occlusion must be between 0 and 1, got {}", a.cloud_occlusion));
-                }
-                if a.sun_disk {
-                    return usage("--landscape draws no sun disk; leave out --sun-disk");
-                }
-            }
-            let decoded = if a.landscape {
-                sky::lut::landscape::decode_landscape(&luts, &camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.cloud_occlusion, 0.15)
-            } else {
-                luts.decode_image(&camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.sun_disk)
-            };
-            if a.landscape && decoded.is_none() {
-                eprintln!("sky lut decode: --landscape: {} has no fog LUTs or no sun; bake it again with this version of sky", a.manifest.display());
-                return Ok(ExitCode::from(EXIT_INVALID));
-            }
-            let Some(xyz) = decoded else {
-                eprintln!("sky lut decode: --sun-disk: {} has no sun (a bake made before the transmittance file); bake it again", a.manifest.display());
-                return Ok(ExitCode::from(EXIT_INVALID));
-            };
-            let pixels = xyz.into_iter().map(PixelResult::from_xyz).collect();
-            let image = Image { width: w, height: h, pixels };
-            let metadata = decoded_metadata(format!("sky {} lut decode", sky::VERSION), &a.manifest, c);
-            output::write_exr(&a.out, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", a.out.display()))?;
-            if let Some(p) = &a.png {
-                output::write_png(p, &image, a.exposure_ev, None).with_context(|| format!("writing {}", p.display()))?;
-            }
-            eprintln!("sky lut decode: {}x{} written to {}", w, h, a.out.display());
-            Ok(ExitCode::SUCCESS)
-        }
+        LutCommand::Decode(a) => decode(a),
     }
 }
 
-fn verify(a: VerifyArgs) -> Result<ExitCode> {
-    use sky::bake::verify::{largest_log_step, reference_twilight_step, twilight_curve, verify, VerifyOptions};
-    if a.directions == 0 || a.spp == 0 || a.fog_spp == 0 {
-        return usage("--directions, --spp and --fog-spp must be at least 1");
-    }
+/// `sky lut sample` (see its help).
+fn sample(a: SampleArgs) -> Result<ExitCode> {
+    check(&a.conditions)?;
     let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
-    let Some(bake) = super::bake::load_bake(&a.bake) else { return Ok(ExitCode::from(EXIT_INVALID)) };
-    let cache_dir = a.cache.clone().unwrap_or_else(|| a.manifest.parent().unwrap_or(std::path::Path::new(".")).join("cache"));
-    let cache = cache_dir.is_dir().then(|| sky::bake::SliceCache::open(&cache_dir).ok()).flatten();
-    let mie = sky::mie::MieCache::from_env();
-    let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let opts = VerifyOptions { directions: a.directions, spp: a.spp, fog_spp: a.fog_spp, ..VerifyOptions::default() };
-    eprintln!("sky lut verify: rendering references ({} directions, {} spp) at 13 sun elevations per basis sky", a.directions, a.spp);
-    let optics = sky::session::OpticsCache::default();
-    let started = std::time::Instant::now();
-    let on_reference = |sky: &str, elev: f64| eprintln!("sky lut verify: {sky}: reference at sun elevation {elev:.2} deg (elapsed {:.0} s)", started.elapsed().as_secs_f64());
-    let report = match verify(&luts, &bake, cache.as_ref(), &opts, &optics, &mie, &on_reference, cancel.clone()) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("sky lut verify: {e}");
+    let c = &a.conditions;
+    let d = direction_deg(a.direction.0, a.direction.1);
+    let rgb = luts.sample(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
+    let xyz = luts.sample_xyz(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d);
+    let space = &luts.manifest.colour.space;
+    // The sun the sky texture leaves out (bakes with a transmittance file).
+    let sun = luts.sun(c.sun_elevation_deg, c.haziness, c.cloudiness);
+    let ambient = luts.ambient(c.sun_elevation_deg, c.haziness, c.cloudiness);
+    if let Some(depth) = a.depth_m {
+        if !(depth >= 0.0 && depth.is_finite() && (0.0..=1.0).contains(&a.cloud_occlusion)) {
+            return usage(format!(
+                "--depth-m must be a distance of 0 m or more and --cloud-occlusion between 0 and 1, got {depth} and {}",
+                a.cloud_occlusion
+            ));
+        }
+        if luts.fog.is_none() {
+            eprintln!("{}: this bake has no fog LUTs (bake it again with this version of sky)", a.manifest.display());
             return Ok(ExitCode::from(EXIT_INVALID));
         }
-    };
-    let quality = if luts.manifest.quality == "final" { sky::bake::Quality::Final } else { sky::bake::Quality::Draft };
-    let mut twilight = Vec::new();
-    for (e, t) in luts.manifest.skies.iter().zip(&luts.textures) {
-        if !bake.skies.iter().any(|s| s.name == e.name) {
-            continue;
-        }
-        let curve = twilight_curve(&luts, e, t);
-        let decoded = largest_log_step(&curve);
-        let reference = match reference_twilight_step(&bake, &e.name, quality, a.spp, &optics, &mie, Vec::new(), cancel.clone()) {
-            Ok(r) => r,
-            Err(err) => {
-                eprintln!("sky lut verify: {err}");
-                return Ok(ExitCode::from(EXIT_INVALID));
-            }
-        };
-        if let Some(dir) = &a.plot {
-            std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-            let series: Vec<sky::plot::Series> = ["zenith", "horizon toward the sun", "horizon away from the sun"]
-                .iter()
-                .enumerate()
-                .map(|(c, label)| sky::plot::Series::new(*label, curve.iter().map(|p| (p[0], p[c + 1])).collect(), c))
-                .collect();
-            let axes = sky::plot::Axes {
-                title: &format!("{}: decoded twilight luminance", e.name),
-                x_label: "sun elevation (deg)",
-                y_label: "Y (cd/m^2)",
-                x_scale: sky::plot::Scale::Linear,
-                y_scale: sky::plot::Scale::Log,
-            };
-            let path = dir.join(format!("twilight_{}.png", e.name));
-            sky::plot::line_plot(&path, &axes, &series).map_err(anyhow::Error::msg)?;
-        }
-        twilight.push(serde_json::json!({ "sky": e.name, "largest_log_step_per_0_1_deg": decoded, "reference_largest_log_step_per_0_1_deg": reference, "curve": curve }));
     }
+    let fog = a.depth_m.and_then(|m| {
+        luts.fog(c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, d, m / 1000.0, a.cloud_occlusion)
+    });
     if a.json {
-        outln!("{}", serde_json::json!({ "skies": report, "twilight": twilight }));
-        return Ok(ExitCode::SUCCESS);
-    }
-    for s in &report {
         outln!(
-            "{}: bake noise (median rel. stderr of Y) {:.2} %, quantisation median {} p99 {}",
-            s.sky,
-            100.0 * s.bake_median_rel_stderr_y,
-            pct(s.quantisation_median_rel),
-            pct(s.quantisation_p99_rel)
+            "{}",
+            serde_json::json!({ "xyz": xyz, "rgb": rgb, "colour_space": space, "units": "cd/m^2 (Y)", "sun": sun, "ambient": ambient, "fog": fog })
         );
-        outln!(
-            "  {:>9} {:>7} {:>9} {:>9} {:>10} {:>10} {:>8} {:>8} {:>7} {:>9} {:>23} {:>17}",
-            "sun_elev",
-            "where",
-            "median_Y",
-            "p99_Y",
-            "aureole_m",
-            "aureole_99",
-            "dE00_m",
-            "dE00_99",
-            "PSNR",
-            "ref_noise",
-            "interp_m/99 (ss)",
-            "direction_m/99"
-        );
-        for e in &s.elevations {
-            let split = |m: f64, p: f64| format!("{:>7.2}%/{:>7.2}%", 100.0 * m, 100.0 * p);
-            let (interp, direction) = match &e.interpolation {
-                Some(i) => (format!("{} ({:.0}%)", split(i.median_rel_y, i.p99_rel_y), 100.0 * i.single_scattering_fraction), split(i.direction_only_median_rel_y, i.direction_only_p99_rel_y)),
-                None => ("n/a".to_string(), "n/a".to_string()),
-            };
+    } else {
+        outln!("XYZ {:.6e} {:.6e} {:.6e}  (Y in cd/m^2)", xyz[0], xyz[1], xyz[2]);
+        outln!("RGB {:.6e} {:.6e} {:.6e}  (linear {space})", rgb[0], rgb[1], rgb[2]);
+        if let Some(s) = sun {
+            let (e, l) = (s.irradiance_rgb, s.disk_radiance_rgb);
             outln!(
-                "  {:>9.2} {:>7} {:>8.2}% {:>8.2}% {:>10} {:>10} {:>8.2} {:>8.2} {:>6.1}dB {:>8.2}% {:>23} {:>17}",
-                e.sun_elevation_deg,
-                if e.slice_centre { "slice" } else { "between" },
-                100.0 * e.median_rel_y,
-                100.0 * e.p99_rel_y,
-                pct(e.aureole_median_rel_y),
-                pct(e.aureole_p99_rel_y),
-                e.median_de2000,
-                e.p99_de2000,
-                e.psnr_db,
-                100.0 * e.reference_median_rel_stderr_y,
-                interp,
-                direction
+                "sun irradiance RGB {:.6e} {:.6e} {:.6e}  (on a surface facing it; lux-like units)",
+                e[0],
+                e[1],
+                e[2]
+            );
+            outln!(
+                "sun disk radiance RGB {:.6e} {:.6e} {:.6e}  (a disk {:.4} deg across)",
+                l[0],
+                l[1],
+                l[2],
+                s.angular_diameter_deg
             );
         }
-    }
-    for s in &report {
-        let summary = |v: Vec<f64>| {
-            let mut v = v;
-            if v.is_empty() {
-                return "n/a".to_string();
-            }
-            let m = sky::bake::verify::percentile(&mut v.clone(), 0.5);
-            format!("median {:.3} %, p99 {:.3} % over {} elevations", 100.0 * m, 100.0 * sky::bake::verify::percentile(&mut v, 0.99), v.len())
-        };
-        outln!("{} sun (decoded irradiance against the optics' column table): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.sun_rel_y).collect()));
-        outln!("{} ambient (decoded upward irradiance against the reference render integrated over its lattice): {}", s.sky, summary(s.elevations.iter().filter_map(|e| e.ambient_rel_y).collect()));
-        if let Some(f) = &s.fog {
-            let spread = |x: &sky::bake::verify_fog::Spread| format!("median {:.2} %, p99 {:.2} % over {}", 100.0 * x.median, 100.0 * x.p99, x.count);
+        if let Some(am) = ambient {
+            let (e, l) = (am.irradiance_up, am.mean_radiance);
             outln!(
-                "{} fog (decoded against rendered fog, 100 m to 50 km, suns between slices; reference noise {:.2} %): fog {}; shadowed fog {}; attenuation {}",
-                s.sky,
-                100.0 * f.reference_noise,
-                spread(&f.fog),
-                spread(&f.shadowed),
-                spread(&f.attenuation)
+                "sky irradiance on an upward surface RGB {:.6e} {:.6e} {:.6e}; mean sky radiance {:.6e} {:.6e} {:.6e}",
+                e[0],
+                e[1],
+                e[2],
+                l[0],
+                l[1],
+                l[2]
             );
-            let by_depth: Vec<String> = sky::bake::verify_fog::FOG_DEPTHS_KM.iter().zip(&f.fog_median_by_depth).map(|(d, m)| format!("{d} km {:.1} %", 100.0 * m)).collect();
-            outln!("{} fog median by depth: {}", s.sky, by_depth.join(", "));
         }
-    }
-    outln!("interp: direction and slice interpolation together, direction: direction interpolation alone (median/p99), both measured on the atmosphere's noise-free single-scattering sky baked in memory at the bake's size (`sky lut interpolation`; ss: its share of the sky's luminance, median; n/a below the horizon, where that sky is no proxy)");
-    for t in &twilight {
-        outln!(
-            "{} twilight: largest step of log Y per 0.1 deg decoded {:.4}, the atmosphere's own {:.4}",
-            t["sky"].as_str().unwrap_or(""),
-            t["largest_log_step_per_0_1_deg"].as_f64().unwrap_or(f64::NAN),
-            t["reference_largest_log_step_per_0_1_deg"].as_f64().unwrap_or(f64::NAN)
-        );
+        if let Some(f) = fog {
+            let (l, t) = (f.inscatter_rgb, f.attenuation_rgb);
+            outln!(
+                "fog in front of an object at {} m ({:.4} of the way to the fog's ceiling): in-scattered RGB {:.6e} {:.6e} {:.6e}, attenuation RGB {:.6} {:.6} {:.6}",
+                a.depth_m.unwrap_or(0.0),
+                f.normalised_depth,
+                l[0],
+                l[1],
+                l[2],
+                t[0],
+                t[1],
+                t[2]
+            );
+        }
     }
     Ok(ExitCode::SUCCESS)
 }
 
-fn pct(v: Option<f64>) -> String {
-    v.map_or("n/a".to_string(), |x| format!("{:.2}%", 100.0 * x))
+/// `sky lut decode` (see its help).
+fn decode(a: DecodeArgs) -> Result<ExitCode> {
+    check(&a.conditions)?;
+    let camera = a.view.camera()?;
+    let Some(luts) = load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    let c = &a.conditions;
+    let (w, h) = a.size;
+    if a.landscape {
+        if !(0.0..=1.0).contains(&a.cloud_occlusion) {
+            return usage(format!("--cloud-occlusion must be between 0 and 1, got {}", a.cloud_occlusion));
+        }
+        if a.sun_disk {
+            return usage("--landscape draws no sun disk; leave out --sun-disk");
+        }
+    }
+    let decoded = if a.landscape {
+        sky::lut::landscape::decode_landscape(
+            &luts,
+            &camera,
+            w,
+            h,
+            c.sun_elevation_deg,
+            c.sun_azimuth_deg,
+            c.haziness,
+            c.cloudiness,
+            a.cloud_occlusion,
+            0.15,
+        )
+    } else {
+        luts.decode_image(&camera, w, h, c.sun_elevation_deg, c.sun_azimuth_deg, c.haziness, c.cloudiness, a.sun_disk)
+    };
+    if a.landscape && decoded.is_none() {
+        eprintln!(
+            "sky lut decode: --landscape: {} has no fog LUTs or no sun; bake it again with this version of sky",
+            a.manifest.display()
+        );
+        return Ok(ExitCode::from(EXIT_INVALID));
+    }
+    let Some(xyz) = decoded else {
+        eprintln!(
+            "sky lut decode: --sun-disk: {} has no sun (a bake made before the transmittance file); bake it again",
+            a.manifest.display()
+        );
+        return Ok(ExitCode::from(EXIT_INVALID));
+    };
+    let pixels = xyz.into_iter().map(PixelResult::from_xyz).collect();
+    let image = Image { width: w, height: h, pixels };
+    let metadata = decoded_metadata(format!("sky {} lut decode", sky::VERSION), &a.manifest, c);
+    output::write_exr(&a.out, &image, None, true, &[], &metadata)
+        .with_context(|| format!("writing {}", a.out.display()))?;
+    if let Some(p) = &a.png {
+        output::write_png(p, &image, a.exposure_ev, None).with_context(|| format!("writing {}", p.display()))?;
+    }
+    eprintln!("sky lut decode: {}x{} written to {}", w, h, a.out.display());
+    Ok(ExitCode::SUCCESS)
 }

@@ -1,19 +1,21 @@
 //! `sky lut interpolation`: what the LUT mappings lose by interpolating,
 //! measured on the noise-free single-scattering sky of an atmosphere
-//! (`sky::lut::interpolation`).
+//! (`sky::study::interpolation`).
 
 use super::{usage, EXIT_INVALID};
 use anyhow::Context;
 use anyhow::Result;
 use clap::Args;
 use sky::atmosphere::Atmosphere;
-use sky::bake::verify::BETWEEN_SLICES_DEG;
+use sky::directions::mapping::{self, DirectionMapping};
 use sky::lut::decode::{sample_sky, Texture};
-use sky::lut::error_map::{error_fisheye, ramp_bar, sky_fisheye, slice_image, write_rgb_png};
-use sky::lut::interpolation::{in_memory_bake, measure, slice_texels, slices_read, Errors, Report, SingleScatteringSky, SkyModel};
-use sky::lut::mapping::{self, DirectionMapping};
 use sky::mie::MieCache;
 use sky::render::{Scene, SpectralSettings, WavelengthSampling};
+use sky::study::error_map::{error_fisheye, ramp_bar, sky_fisheye, slice_image, write_rgb_png};
+use sky::study::interpolation::{
+    in_memory_bake, measure, slice_texels, slices_read, Errors, Report, SingleScatteringSky, SkyModel,
+};
+use sky::study::verify::BETWEEN_SLICES_DEG;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -73,11 +75,25 @@ pub fn run(a: InterpolationArgs) -> Result<ExitCode> {
         }
     };
     eprintln!("sky lut interpolation: preparing the optics of {}", a.atmosphere.display());
-    let spectral = SpectralSettings { band_nm: a.band_nm, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: Vec::new(), xyz: true };
+    let spectral = SpectralSettings {
+        band_nm: a.band_nm,
+        wavelength_sampling: WavelengthSampling::Hero,
+        spectral_nm: Vec::new(),
+        xyz: true,
+    };
     let scene = Scene::new(&atm, &spectral, &MieCache::from_env(), &|| {});
     let model = SingleScatteringSky { scene: &scene, altitude_km: a.altitude_m / 1000.0 };
     eprintln!("sky lut interpolation: single scattering at {w}x{h}, {} directions (a minute or two)", a.directions);
-    let r = measure(&model, w, h, atm.planet.radius_km, atm.planet.top_km, a.directions, &BETWEEN_SLICES_DEG, a.threshold_deg);
+    let r = measure(
+        &model,
+        w,
+        h,
+        atm.planet.radius_km,
+        atm.planet.top_km,
+        a.directions,
+        &BETWEEN_SLICES_DEG,
+        a.threshold_deg,
+    );
     if let Some(dir) = &a.plot {
         plot(dir, &model, &r, atm.planet.radius_km, atm.planet.top_km)?;
     }
@@ -88,7 +104,9 @@ pub fn run(a: InterpolationArgs) -> Result<ExitCode> {
     outln!("{} at {w}x{h}: relative luminance error of the noise-free single-scattering sky, {} directions above the horizon (the aureole, within 5 deg of the sun, apart)", atm.name, a.directions);
     outln!("direction interpolation at each slice's own sun, in both mappings (median / p99):");
     outln!("  slice  sun zenith   sun-centred: sky          aureole            latitude-longitude: sky   aureole");
-    let au = |e: &Errors| format!("{:>7} / {:>7}", pct(e.aureole_median.unwrap_or(f64::NAN)), pct(e.aureole_p99.unwrap_or(f64::NAN)));
+    let au = |e: &Errors| {
+        format!("{:>7} / {:>7}", pct(e.aureole_median.unwrap_or(f64::NAN)), pct(e.aureole_p99.unwrap_or(f64::NAN)))
+    };
     for s in &r.regions {
         outln!(
             "  {:>5}  {:>8.3} deg  {:>7} / {:>7}  {}   {:>7} / {:>7}  {}{}",
@@ -135,24 +153,46 @@ fn plot(dir: &std::path::Path, model: &SingleScatteringSky, r: &Report, radius_k
     let (w, h) = (r.width, r.height);
     let nearest = |elev: f64| {
         (0..mapping::UPPER_SLICES)
-            .min_by(|&i, &j| (mapping::slice_sun_zenith_deg(i, radius_km, top_km) - (90.0 - elev)).abs().total_cmp(&(mapping::slice_sun_zenith_deg(j, radius_km, top_km) - (90.0 - elev)).abs()))
+            .min_by(|&i, &j| {
+                (mapping::slice_sun_zenith_deg(i, radius_km, top_km) - (90.0 - elev))
+                    .abs()
+                    .total_cmp(&(mapping::slice_sun_zenith_deg(j, radius_km, top_km) - (90.0 - elev)).abs())
+            })
             .unwrap_or(0)
     };
     let shown = [nearest(30.0), nearest(10.0)];
-    let mut layers: Vec<usize> = r.between.iter().filter(|b| b.sun_elevation_deg >= 0.0).flat_map(|b| slices_read(90.0 - b.sun_elevation_deg, radius_km, top_km)).collect();
+    let mut layers: Vec<usize> = r
+        .between
+        .iter()
+        .filter(|b| b.sun_elevation_deg >= 0.0)
+        .flat_map(|b| slices_read(90.0 - b.sun_elevation_deg, radius_km, top_km))
+        .collect();
     layers.extend(shown);
     let (entry, texture) = in_memory_bake(model, w, h, radius_km, top_km, r.threshold_deg, &layers);
-    let png = |name: String, rgb: Vec<u8>, side: usize| write_rgb_png(&dir.join(&name), side, side, rgb).with_context(|| format!("writing {name}"));
+    let png = |name: String, rgb: Vec<u8>, side: usize| {
+        write_rgb_png(&dir.join(&name), side, side, rgb).with_context(|| format!("writing {name}"))
+    };
     for b in r.between.iter().filter(|b| b.sun_elevation_deg >= 0.0) {
         let z = 90.0 - b.sun_elevation_deg;
-        png(format!("error_sun_{:.1}.png", b.sun_elevation_deg), error_fisheye(PICTURE, &|d| sample_sky(&entry, &texture, z, 0.0, d)[1], &|d| model.xyz(z, d)[1]), PICTURE)?;
+        png(
+            format!("error_sun_{:.1}.png", b.sun_elevation_deg),
+            error_fisheye(PICTURE, &|d| sample_sky(&entry, &texture, z, 0.0, d)[1], &|d| model.xyz(z, d)[1]),
+            PICTURE,
+        )?;
     }
     for i in shown {
         let z = entry.slices[i].sun_zenith_deg;
         let stored = dir.join(format!("slice_{i}_stored.png"));
-        sky::render::output::write_png(&stored, &slice_image(&texture, i, 3), 0.0, None).with_context(|| format!("writing {}", stored.display()))?;
+        sky::render::output::write_png(&stored, &slice_image(&texture, i, 3), 0.0, None)
+            .with_context(|| format!("writing {}", stored.display()))?;
         let decoded = dir.join(format!("slice_{i}_decoded.png"));
-        sky::render::output::write_png(&decoded, &sky_fisheye(PICTURE, &|d| sample_sky(&entry, &texture, z, 0.0, d)), 0.0, None).with_context(|| format!("writing {}", decoded.display()))?;
+        sky::render::output::write_png(
+            &decoded,
+            &sky_fisheye(PICTURE, &|d| sample_sky(&entry, &texture, z, 0.0, d)),
+            0.0,
+            None,
+        )
+        .with_context(|| format!("writing {}", decoded.display()))?;
     }
     // Both mappings at the first slice past the threshold.
     if let Some(s) = r.regions.iter().find(|s| s.sun_zenith_deg > r.threshold_deg) {
@@ -163,7 +203,11 @@ fn plot(dir: &std::path::Path, model: &SingleScatteringSky, r: &Report, radius_k
                 let (u, v) = m.uv_in_region(d, sun_centred);
                 t.bilinear(0, u, v)[1]
             };
-            png(format!("mapping_{}_{name}.png", s.index), error_fisheye(PICTURE, &decoded, &|d| model.xyz(s.sun_zenith_deg, d)[1]), PICTURE)?;
+            png(
+                format!("mapping_{}_{name}.png", s.index),
+                error_fisheye(PICTURE, &decoded, &|d| model.xyz(s.sun_zenith_deg, d)[1]),
+                PICTURE,
+            )?;
         }
     }
     write_rgb_png(&dir.join("ramp.png"), 256, 16, ramp_bar(256, 16)).context("writing ramp.png")?;

@@ -34,7 +34,13 @@ pub struct MieArgs {
     #[arg(long, value_name = "W")]
     wavelength_nm: Option<f64>,
     /// Scattering angles for S1, S2 and the phase function, degrees
-    #[arg(long, value_name = "A,B,...", allow_hyphen_values = true, value_delimiter = ',', default_value = "0,1,2,5,10,20,30,45,60,90,120,150,180")]
+    #[arg(
+        long,
+        value_name = "A,B,...",
+        allow_hyphen_values = true,
+        value_delimiter = ',',
+        default_value = "0,1,2,5,10,20,30,45,60,90,120,150,180"
+    )]
     angles_deg: Vec<f64>,
     /// Machine-readable output
     #[arg(long)]
@@ -81,9 +87,24 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
             });
             outln!("{}", serde_json::to_string_pretty(&v)?);
         } else {
-            outln!("log-normal number distribution: r_median {r} um, sigma {sigma} (GSD {:.4}), m = {}{:+}i, {w} nm", sigma.exp(), a.m.re, -a.m.im);
-            outln!("  C_ext {:.6e} um^2   C_sca {:.6e} um^2   C_abs {:.6e} um^2", b.c_ext_um2, b.c_sca_um2, b.c_ext_um2 - b.c_sca_um2);
-            outln!("  single-scattering albedo {:.6}   g {:.6}   ({} radius nodes)", b.single_scattering_albedo(), b.g, b.radius_nodes);
+            outln!(
+                "log-normal number distribution: r_median {r} um, sigma {sigma} (GSD {:.4}), m = {}{:+}i, {w} nm",
+                sigma.exp(),
+                a.m.re,
+                -a.m.im
+            );
+            outln!(
+                "  C_ext {:.6e} um^2   C_sca {:.6e} um^2   C_abs {:.6e} um^2",
+                b.c_ext_um2,
+                b.c_sca_um2,
+                b.c_ext_um2 - b.c_sca_um2
+            );
+            outln!(
+                "  single-scattering albedo {:.6}   g {:.6}   ({} radius nodes)",
+                b.single_scattering_albedo(),
+                b.g,
+                b.radius_nodes
+            );
             outln!("  {:>9}  {:>14}", "angle_deg", "phase_sr_inv");
             for (t, p) in a.angles_deg.iter().zip(&b.phase_sr_inv) {
                 outln!("  {t:>9}  {p:>14.6e}");
@@ -104,7 +125,8 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
         return usage(format!("--x {x} is beyond the supported range (up to 1e5)"));
     }
     let r = mie::bhmie(a.m, x, &mus);
-    let phase: Vec<f64> = r.s1.iter().zip(&r.s2).map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca)).collect();
+    let phase: Vec<f64> =
+        r.s1.iter().zip(&r.s2).map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca)).collect();
     if a.json {
         let mut v = json!({
             "m_re": a.m.re, "m_im": a.m.im, "x": x,
@@ -127,14 +149,29 @@ pub fn run(a: MieArgs) -> Result<ExitCode> {
         outln!("{}", serde_json::to_string_pretty(&v)?);
     } else {
         outln!("sphere: x = {x}, m = {}{:+}i", a.m.re, -a.m.im);
-        outln!("  Q_ext {:.8}   Q_sca {:.8}   Q_abs {:.8}   Q_back {:.8}   g {:.8}", r.q_ext, r.q_sca, r.q_abs(), r.q_back, r.g);
+        outln!(
+            "  Q_ext {:.8}   Q_sca {:.8}   Q_abs {:.8}   Q_back {:.8}   g {:.8}",
+            r.q_ext,
+            r.q_sca,
+            r.q_abs(),
+            r.q_back,
+            r.g
+        );
         if let Some(rad) = radius_um {
             let area = PI * rad * rad;
             outln!("  radius {rad} um: C_ext {:.6e} um^2   C_sca {:.6e} um^2", r.q_ext * area, r.q_sca * area);
         }
         outln!("  {:>9}  {:>26}  {:>26}  {:>14}", "angle_deg", "S1", "S2", "phase_sr_inv");
         for i in 0..mus.len() {
-            outln!("  {:>9}  {:>12.5e}{:+12.5e}i  {:>12.5e}{:+12.5e}i  {:>14.6e}", a.angles_deg[i], r.s1[i].re, r.s1[i].im, r.s2[i].re, r.s2[i].im, phase[i]);
+            outln!(
+                "  {:>9}  {:>12.5e}{:+12.5e}i  {:>12.5e}{:+12.5e}i  {:>14.6e}",
+                a.angles_deg[i],
+                r.s1[i].re,
+                r.s1[i].im,
+                r.s2[i].re,
+                r.s2[i].im,
+                phase[i]
+            );
         }
     }
     Ok(ExitCode::SUCCESS)

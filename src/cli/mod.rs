@@ -17,15 +17,19 @@ mod atmosphere;
 mod bake;
 mod bench;
 mod bench_bake;
+mod bench_disort;
+mod bench_farm;
 mod bench_preview;
 mod farm_args;
 mod lut;
 mod lut_fog;
 mod lut_interpolation;
+mod lut_verify;
 mod mie;
 mod preview;
 mod progress;
 mod render;
+mod render_output;
 mod worker;
 
 use clap::{Parser, Subcommand};
@@ -62,7 +66,7 @@ enum Command {
     /// Read a bake's LUTs as a runtime does: sample a direction, decode a whole sky
     #[command(subcommand)]
     Lut(lut::LutCommand),
-    /// Headless GPU preview of a bake: its sky decoded on the GPU (lavapipe without one) to EXR and PNG (fog and clouds: not yet)
+    /// Headless GPU preview of a bake: its sky, the landscape through the global fog and cumulus clouds, drawn on the GPU (lavapipe without one) to EXR and PNG
     Preview(preview::PreviewArgs),
     /// Validate and inspect atmosphere files (TOML; a file without a [sun]
     /// table gets the shipped ASTM G173-03 extraterrestrial sun with a 0.533

@@ -1,5 +1,7 @@
 //! `sky preview`: a bake's sky decoded on the GPU (wgpu; a real GPU or
-//! Mesa's lavapipe), written as linear XYZ OpenEXR and a tonemapped PNG.
+//! Mesa's lavapipe), with the landscape through its global fog and
+//! ray-marched cumulus clouds, written as linear XYZ OpenEXR and a
+//! tonemapped PNG.
 //! Without the `preview` feature the command says how to get it.
 
 use super::lut::ViewArgs;
@@ -109,24 +111,38 @@ pub fn run(_a: PreviewArgs) -> Result<ExitCode> {
 
 #[cfg(feature = "preview")]
 pub fn run(a: PreviewArgs) -> Result<ExitCode> {
-    use super::lut::Conditions;
     use super::EXIT_INVALID;
-    use anyhow::Context;
-    use sky::look::timeline::{self, FrameState};
-    use sky::lut::decode::mat_mul;
-    use sky::preview::cloud_coverage;
-    use sky::preview::clouds::Amortisation;
-    use sky::preview::gpu::Gpu;
-    use sky::preview::landscape::Ground;
-    use sky::preview::session::{CloudOptions, PreviewOptions, PreviewSession};
-    use sky::render::{output, Image, PixelResult};
 
-    let states: Vec<FrameState> = match &a.timeline {
+    let Some(states) = frame_states(&a)? else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    check_flags(&a)?;
+    let camera = a.view.camera()?;
+    let (w, h) = a.size;
+    if w == 0 || h == 0 {
+        return super::usage("--size must be at least 1x1");
+    }
+    let Some(luts) = super::lut::load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    let Some(mut session) = start_session(&a, &luts, &states)? else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    let adapter = session.gpu.describe();
+    let reports = render_frames(&a, &mut session, &luts, &states, &camera, &adapter)?;
+    if a.json {
+        outln!("{}", serde_json::json!({ "adapter": adapter, "width": w, "height": h, "frames": reports }));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The states of the frames: the --timeline's, or --frames of one state
+/// from the flags (checked). `None`: the timeline did not load (said on stderr).
+#[cfg(feature = "preview")]
+fn frame_states(a: &PreviewArgs) -> Result<Option<Vec<sky::look::timeline::FrameState>>> {
+    use super::lut::Conditions;
+    use sky::look::timeline::{self, FrameState};
+
+    Ok(Some(match &a.timeline {
         Some(path) => match timeline::load(path) {
             Ok(s) => s,
             Err(e) => {
                 eprintln!("sky preview: --timeline {e}");
-                return Ok(ExitCode::from(EXIT_INVALID));
+                return Ok(None);
             }
         },
         None => {
@@ -160,7 +176,12 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             };
             (0..a.frames).map(|frame| FrameState { frame, ..state.clone() }).collect()
         }
-    };
+    }))
+}
+
+/// The flags of the picture and the clouds: their ranges.
+#[cfg(feature = "preview")]
+fn check_flags(a: &PreviewArgs) -> Result<()> {
     if !a.exposure_ev.is_finite() || a.ev100.is_some_and(|e| !(-20.0..=30.0).contains(&e)) {
         return super::usage("--exposure-ev must be a number and --ev100 from -20 to 30");
     }
@@ -174,26 +195,46 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
         return super::usage("--gbuffer-size must be from 1 to 4096 and --cloud-samples from 1 to 1024");
     }
     if a.frames_per_sample == 0 || 64 % a.frames_per_sample != 0 {
-        return super::usage(format!("--frames-per-sample must divide 64 (1, 2, 4, 8, 16, 32 or 64), got {}", a.frames_per_sample));
+        return super::usage(format!(
+            "--frames-per-sample must divide 64 (1, 2, 4, 8, 16, 32 or 64), got {}",
+            a.frames_per_sample
+        ));
     }
-    let camera = a.view.camera()?;
-    let (w, h) = a.size;
-    if w == 0 || h == 0 {
-        return super::usage("--size must be at least 1x1");
-    }
-    let Some(luts) = super::lut::load(&a.manifest) else { return Ok(ExitCode::from(EXIT_INVALID)) };
+    Ok(())
+}
+
+/// The preview on the GPU: the landscape where the bake has fog LUTs, the
+/// clouds where a state has cumulus cover (their generated coverage written
+/// with --gbuffer), the output folder created. `None`: no GPU, or the
+/// --coverage did not load (said on stderr).
+#[cfg(feature = "preview")]
+fn start_session<'l>(
+    a: &PreviewArgs,
+    luts: &'l sky::lut::decode::Luts,
+    states: &[sky::look::timeline::FrameState],
+) -> Result<Option<sky::preview::session::PreviewSession<'l>>> {
+    use anyhow::Context;
+    use sky::preview::cloud_coverage;
+    use sky::preview::clouds::Amortisation;
+    use sky::preview::gpu::Gpu;
+    use sky::preview::landscape::Ground;
+    use sky::preview::session::{CloudOptions, PreviewOptions, PreviewSession};
+
     let gpu = match Gpu::new() {
         Ok(g) => g,
         Err(e) => {
             eprintln!("sky preview: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
+            return Ok(None);
         }
     };
     let ground = match (a.no_landscape, luts.manifest.fog.is_some()) {
         (true, _) => None,
         (false, true) => Some(Ground { albedo: a.albedo, cloud_occlusion: a.cloud_occlusion }),
         (false, false) => {
-            eprintln!("sky preview: {} has no fog LUTs (baked before them): the sky alone, without the landscape", a.manifest.display());
+            eprintln!(
+                "sky preview: {} has no fog LUTs (baked before them): the sky alone, without the landscape",
+                a.manifest.display()
+            );
             None
         }
     };
@@ -204,7 +245,7 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             Ok(c) => Some(c),
             Err(e) => {
                 eprintln!("sky preview: --coverage {e}");
-                return Ok(ExitCode::from(EXIT_INVALID));
+                return Ok(None);
             }
         },
         (None, true) => Some(cloud_coverage::default_coverage()),
@@ -213,28 +254,73 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
     if let (true, None, Some(c)) = (a.gbuffer, &a.coverage, &coverage) {
         cloud_coverage::write_coverage_png(&a.out.join("coverage.png"), c)?;
     }
-    let schedule = Amortisation { frames_per_sample: a.frames_per_sample, blend_frames: a.frames_per_sample * a.cloud_samples };
-    let clouds = coverage.map(|coverage| CloudOptions { coverage, gbuffer_size: a.gbuffer_size, samples: a.cloud_samples, schedule });
+    let schedule =
+        Amortisation { frames_per_sample: a.frames_per_sample, blend_frames: a.frames_per_sample * a.cloud_samples };
+    let clouds = coverage.map(|coverage| CloudOptions {
+        coverage,
+        gbuffer_size: a.gbuffer_size,
+        samples: a.cloud_samples,
+        schedule,
+    });
     let options = PreviewOptions { sun_disk: !a.no_sun_disk, ground, clouds };
-    let mut session = PreviewSession::new(gpu, &luts, options).context("preparing the preview on the GPU")?;
-    let adapter = session.gpu.describe();
+    let session = PreviewSession::new(gpu, luts, options).context("preparing the preview on the GPU")?;
+    Ok(Some(session))
+}
+
+/// Renders every state on the GPU and writes its pictures (and cloud
+/// G-buffers with --gbuffer), a line per frame on stderr without --json;
+/// returns the frames' JSON reports.
+#[cfg(feature = "preview")]
+fn render_frames(
+    a: &PreviewArgs,
+    session: &mut sky::preview::session::PreviewSession,
+    luts: &sky::lut::decode::Luts,
+    states: &[sky::look::timeline::FrameState],
+    camera: &sky::directions::camera::Camera,
+    adapter: &str,
+) -> Result<Vec<serde_json::Value>> {
+    use super::lut::Conditions;
+    use anyhow::Context;
+    use sky::colour::apply as mat_mul;
+    use sky::render::{output, Image, PixelResult};
+
+    let (w, h) = a.size;
     let m = luts.manifest.colour.xyz_from_rgb;
     let numbered = states.len() > 1;
-    let name = |stem: &str, frame: usize, ext: &str| if numbered { a.out.join(format!("{stem}.{frame:04}.{ext}")) } else { a.out.join(format!("{stem}.{ext}")) };
+    let name = |stem: &str, frame: usize, ext: &str| {
+        if numbered {
+            a.out.join(format!("{stem}.{frame:04}.{ext}"))
+        } else {
+            a.out.join(format!("{stem}.{ext}"))
+        }
+    };
     let started = std::time::Instant::now();
     let mut reports = Vec::new();
     for (k, state) in states.iter().enumerate() {
-        let out = session.render(state, &camera, w, h).with_context(|| format!("rendering frame {k} on the GPU"))?;
-        let pixels = out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
+        let out = session.render(state, camera, w, h).with_context(|| format!("rendering frame {k} on the GPU"))?;
+        let pixels =
+            out.rendered.rgb.iter().map(|rgb| PixelResult::from_xyz(mat_mul(&m, rgb.map(f64::from)))).collect();
         let image = Image { width: w, height: h, pixels };
         let (exr, png) = (name("sky", k, "exr"), name("sky", k, "png"));
-        let c = Conditions { sun_elevation_deg: state.sun_elevation_deg, sun_azimuth_deg: state.sun_azimuth_deg, haziness: state.haziness, cloudiness: state.cloudiness };
-        let mut metadata = super::lut::decoded_metadata(format!("sky {} preview ({adapter})", sky::VERSION), &a.manifest, &c);
+        let c = Conditions {
+            sun_elevation_deg: state.sun_elevation_deg,
+            sun_azimuth_deg: state.sun_azimuth_deg,
+            haziness: state.haziness,
+            cloudiness: state.cloudiness,
+        };
+        let mut metadata =
+            super::lut::decoded_metadata(format!("sky {} preview ({adapter})", sky::VERSION), &a.manifest, &c);
         metadata.push(("cumulus_cover".into(), state.cumulus_cover.to_string()));
         metadata.push(("frame".into(), k.to_string()));
-        output::write_exr(&exr, &image, None, true, &[], &metadata).with_context(|| format!("writing {}", exr.display()))?;
+        output::write_exr(&exr, &image, None, true, &[], &metadata)
+            .with_context(|| format!("writing {}", exr.display()))?;
         match a.ev100 {
-            Some(ev) => output::write_png_scaled(&png, &image, 2f64.powf(a.exposure_ev) / output::saturation_luminance(ev), None),
+            Some(ev) => output::write_png_scaled(
+                &png,
+                &image,
+                2f64.powf(a.exposure_ev) / output::saturation_luminance(ev),
+                None,
+            ),
             None => output::write_png(&png, &image, a.exposure_ev, None),
         }
         .with_context(|| format!("writing {}", png.display()))?;
@@ -246,11 +332,15 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
                 files.push(path);
             }
         }
-        let passes: serde_json::Map<String, serde_json::Value> = out.rendered.passes.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect();
+        let passes: serde_json::Map<String, serde_json::Value> =
+            out.rendered.passes.iter().map(|(n, s)| (n.to_string(), serde_json::json!(s))).collect();
         if !a.json {
-            let gpu_ms: Vec<String> = out.rendered.passes.iter().map(|(n, s)| format!("{n} {:.2} ms", 1e3 * s)).collect();
+            let gpu_ms: Vec<String> =
+                out.rendered.passes.iter().map(|(n, s)| format!("{n} {:.2} ms", 1e3 * s)).collect();
             let gpu_ms = if gpu_ms.is_empty() { String::new() } else { format!("; GPU: {}", gpu_ms.join(", ")) };
-            let clock = state.hours.map_or(String::new(), |h| format!(" {:02}:{:02},", h as u32, ((h.fract() * 60.0).round() as u32).min(59)));
+            let clock = state.hours.map_or(String::new(), |h| {
+                format!(" {:02}:{:02},", h as u32, ((h.fract() * 60.0).round() as u32).min(59))
+            });
             let done = k + 1;
             let eta = started.elapsed().as_secs_f64() / done as f64 * (states.len() - done) as f64;
             let eta = if done < states.len() { format!(", ETA {eta:.0} s") } else { String::new() };
@@ -273,28 +363,34 @@ pub fn run(a: PreviewArgs) -> Result<ExitCode> {
             "gpu_pass_seconds": passes,
         }));
     }
-    if a.json {
-        outln!("{}", serde_json::json!({ "adapter": adapter, "width": w, "height": h, "frames": reports }));
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(reports)
 }
 
 /// The cloud G-buffer as an OpenEXR of four float channels: opacity,
 /// distance_km, sun_inscatter, ambient_inscatter.
 #[cfg(feature = "preview")]
-fn write_gbuffer(gpu: &sky::preview::gpu::Gpu, clouds: &sky::preview::clouds::Clouds, path: &std::path::Path) -> Result<()> {
+fn write_gbuffer(
+    gpu: &sky::preview::gpu::Gpu,
+    clouds: &sky::preview::clouds::Clouds,
+    path: &std::path::Path,
+) -> Result<()> {
     use anyhow::Context;
     let texels = clouds.read_gbuffer(gpu)?;
     let n = clouds.gbuffer_size() as usize;
-    let channels = exr::prelude::SpecificChannels::build().with_channel("opacity").with_channel("distance_km").with_channel("sun_inscatter").with_channel("ambient_inscatter").with_pixel_fn(
-        |p: exr::math::Vec2<usize>| {
+    let channels = exr::prelude::SpecificChannels::build()
+        .with_channel("opacity")
+        .with_channel("distance_km")
+        .with_channel("sun_inscatter")
+        .with_channel("ambient_inscatter")
+        .with_pixel_fn(|p: exr::math::Vec2<usize>| {
             let t = texels[p.y() * n + p.x()];
             (t[0], t[1], t[2], t[3])
-        },
-    );
+        });
     let image = exr::prelude::Image::from_channels((n, n), channels);
     let mut bytes = std::io::Cursor::new(Vec::new());
-    exr::prelude::WritableImage::write(&image).to_buffered(&mut bytes).with_context(|| format!("encoding {}", path.display()))?;
-    sky::lut::atomic::write_atomically(path, bytes.get_ref()).with_context(|| format!("writing {}", path.display()))?;
+    exr::prelude::WritableImage::write(&image)
+        .to_buffered(&mut bytes)
+        .with_context(|| format!("encoding {}", path.display()))?;
+    sky::atomic::write_atomically(path, bytes.get_ref()).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }

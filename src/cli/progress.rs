@@ -130,7 +130,10 @@ fn show_bars(b: &mut Option<Bars>, p: &Progress) {
         (None, None) => "ETA …".into(),
     });
     for (l, w) in bars.lines.iter().zip(&p.workers) {
-        l.set_message(format!("{:<16} {:<21} {:<14} {:>4} tasks {:>5} columns {:>7.2} col/s", w.name, w.address, w.state, w.tasks_done, w.columns_done, w.columns_per_s));
+        l.set_message(format!(
+            "{:<16} {:<21} {:<14} {:>4} tasks {:>5} columns {:>7.2} col/s",
+            w.name, w.address, w.state, w.tasks_done, w.columns_done, w.columns_per_s
+        ));
         l.tick();
     }
 }
@@ -142,12 +145,20 @@ pub fn progress_line(p: &Progress) -> String {
     let pct = if p.pixels_total > 0 { 100.0 * p.pixels_done as f64 / p.pixels_total as f64 } else { 100.0 };
     let eta = p.eta_s.map_or("unknown".to_string(), fmt_duration);
     let px_per_s = p.pixels_done as f64 / p.elapsed_s.max(1e-3);
-    format!("sky render: {pct:.0} % ({}/{} px), {} px/s, elapsed {}, ETA {eta}", p.pixels_done, p.pixels_total, fmt_rate(px_per_s), fmt_duration(p.elapsed_s))
+    format!(
+        "sky render: {pct:.0} % ({}/{} px), {} px/s, elapsed {}, ETA {eta}",
+        p.pixels_done,
+        p.pixels_total,
+        fmt_rate(px_per_s),
+        fmt_duration(p.elapsed_s)
+    )
 }
 
 fn describe(e: &FarmEvent) -> String {
     match e {
-        FarmEvent::Quarantined { worker, why } => format!("sky render: worker {worker} quarantined for this job: {why}"),
+        FarmEvent::Quarantined { worker, why } => {
+            format!("sky render: worker {worker} quarantined for this job: {why}")
+        }
         FarmEvent::TaskFailed { worker, message } => format!("sky render: worker {worker}: {message}"),
         FarmEvent::Progress(p) => progress_line(p),
     }

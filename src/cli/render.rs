@@ -1,18 +1,26 @@
 //! `sky render`: the path tracer, on the local cores (the embedded worker)
 //! or across `sky worker` daemons, through the same farm coordinator.
+//!
+//! [`run`] goes in phases: the flags are checked into a [`Checked`] (camera,
+//! image size, farm plan) before any work starts, the settings are built
+//! from them, the optics are prepared in a session, the view is rendered
+//! (locally or on the farm, journaled next to the output), and the outputs
+//! and the summary are written by `render_output`.
 
+use super::render_output::Outputs;
 use super::{usage, EXIT_INVALID};
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
-use serde_json::json;
-use sky::atmosphere::Atmosphere;
+use sky::atmosphere::{Atmosphere, Bundle};
+use sky::directions::camera::Camera;
 use sky::farm::coordinator::{FarmError, Options, WorkerSpec};
+use sky::farm::job::FarmJob;
 use sky::farm::journal;
+use sky::farm::proto::Tile;
 use sky::mie::MieCache;
-use sky::render::camera::Camera;
 use sky::render::fog::Fog;
 use sky::render::tracer::Estimator;
-use sky::render::{self, output, Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
+use sky::render::{Scene, Settings, SingleScatter, SpectralSettings, View, WavelengthSampling};
 use sky::session::{OpticsCache, Session};
 use sky::table::Table;
 use std::collections::BTreeMap;
@@ -183,7 +191,102 @@ fn read_directions(path: &std::path::Path) -> Result<Vec<(f64, f64)>> {
     Ok(z.iter().copied().zip(a.iter().copied()).collect())
 }
 
+/// The checked flags and what they name: the "high args" a render runs from.
+struct Checked {
+    camera: Camera,
+    width: usize,
+    height: usize,
+    /// The farm's workers and options (`None`: the embedded worker alone).
+    plan: Option<(Vec<WorkerSpec>, Options)>,
+    outputs: Outputs,
+}
+
 pub fn run(a: RenderArgs) -> Result<ExitCode> {
+    let Checked { camera, width, height, plan, outputs } = check(&a)?;
+    let (atm, bundle) = match Atmosphere::load_bundle(&a.atmosphere) {
+        Ok(x) => x,
+        Err(e) => {
+            eprintln!("{e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    let settings = settings(&a, camera, width, height);
+    if let (Some(_), Err(e)) = (settings.view.fog, settings.view.check()) {
+        return usage(e);
+    }
+    let cancel = Arc::new(AtomicBool::new(false));
+    {
+        let c = cancel.clone();
+        let _ = ctrlc::set_handler(move || c.store(true, Ordering::SeqCst));
+    }
+    let threads = a
+        .threads
+        .filter(|&t| t > 0)
+        .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    let start = Instant::now();
+    let (farm, style, view) = farm_options(&a, plan, threads);
+    let session = prepare_session(threads, atm, bundle, &settings, farm, style, start)?;
+    let atm = &session.atmosphere;
+    let prep_s = start.elapsed().as_secs_f64();
+    let job = session.job(&settings.view);
+    // The journal next to the output: every accepted column, synced.
+    let (journal, resumed) = open_journal(&a, &job, width, height)?;
+    let journal_path = journal.as_ref().map(|j| j.path().to_path_buf());
+    let t0 = Instant::now();
+    let outcome = session.render(job.clone(), resumed, journal, cancel.clone());
+    view.finish();
+    let rendered = match outcome {
+        Ok(r) => r,
+        Err(FarmError::Cancelled) => {
+            match &journal_path {
+                Some(j) => eprintln!(
+                    "sky render: cancelled; no image was written ({} keeps the finished columns: --resume continues)",
+                    j.display()
+                ),
+                None => eprintln!("sky render: cancelled; nothing was written"),
+            }
+            return Ok(ExitCode::from(130));
+        }
+        Err(e) => {
+            eprintln!("sky render: {e}");
+            return Ok(ExitCode::from(EXIT_INVALID));
+        }
+    };
+    super::render_output::finish(&outputs, &settings, atm, rendered, prep_s, t0, journal_path)
+}
+
+/// Checks the flags (in the order the command always has, so that the same
+/// mistake gets the same message) and works out the camera and the farm plan.
+fn check(a: &RenderArgs) -> Result<Checked> {
+    check_flags(a)?;
+    let (camera, (width, height)) = camera(a)?;
+    if let Some(v) = a.verify_fraction {
+        if !(0.0..=1.0).contains(&v) {
+            return usage(format!("--verify-fraction must be between 0 and 1, got {v}"));
+        }
+    }
+    if let Some(l) = a.lease_s {
+        if !(l > 0.0 && l.is_finite()) {
+            return usage(format!("--lease-s must be a positive number of seconds, got {l}"));
+        }
+    }
+    if a.resume && a.out.is_none() {
+        return usage("--resume continues OUT.exr.journal and needs --out");
+    }
+    let plan = super::farm_args::farm_plan(&a.farm)?;
+    let outputs = Outputs {
+        out: a.out.clone(),
+        png: a.png.clone(),
+        exposure_ev: a.exposure_ev,
+        json: a.json,
+        json_progress: a.json_progress,
+        denoise: a.denoise,
+    };
+    Ok(Checked { camera, width, height, plan, outputs })
+}
+
+/// The flags' own ranges and combinations.
+fn check_flags(a: &RenderArgs) -> Result<()> {
     if let Some(e) = a.max_rel_error {
         if !(e > 0.0 && e < 1.0) {
             return usage(format!("--max-rel-error must be between 0 and 1, got {e}"));
@@ -218,18 +321,31 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             return usage(format!("--out {}: the output is OpenEXR and must end in .exr", o.display()));
         }
     }
-    let (camera, (width, height)) = match a.camera {
+    Ok(())
+}
+
+/// The camera of --camera and its image size (a --directions file's rows
+/// make one row of pixels).
+fn camera(a: &RenderArgs) -> Result<(Camera, (usize, usize))> {
+    Ok(match a.camera {
         CameraKind::Equirect => (Camera::Equirect, a.size),
         CameraKind::Fisheye => (Camera::Fisheye, a.size),
-        CameraKind::Pinhole => (Camera::Pinhole { azimuth_deg: a.look_azimuth_deg, elevation_deg: a.look_elevation_deg, fov_deg: a.fov_deg }, a.size),
+        CameraKind::Pinhole => (
+            Camera::Pinhole {
+                azimuth_deg: a.look_azimuth_deg,
+                elevation_deg: a.look_elevation_deg,
+                fov_deg: a.fov_deg,
+            },
+            a.size,
+        ),
         CameraKind::Lut => {
             let (w, h) = a.size;
             let threshold_deg = match a.lut_threshold_deg {
                 Some(t) if (0.0..=90.0).contains(&t) => t,
                 Some(t) => return usage(format!("--lut-threshold-deg must be between 0 and 90, got {t}")),
-                None => sky::lut::mapping::default_threshold_deg(w, h),
+                None => sky::directions::mapping::default_threshold_deg(w, h),
             };
-            let mapping = sky::lut::mapping::DirectionMapping::new(a.sun_zenith_deg, threshold_deg);
+            let mapping = sky::directions::mapping::DirectionMapping::new(a.sun_zenith_deg, threshold_deg);
             (Camera::Lut { mapping, sun_azimuth_deg: a.sun_azimuth_deg }, a.size)
         }
         CameraKind::Directions => {
@@ -238,29 +354,12 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             let n = list.len();
             (Camera::Directions(list), (n, 1))
         }
-    };
-    if let Some(v) = a.verify_fraction {
-        if !(0.0..=1.0).contains(&v) {
-            return usage(format!("--verify-fraction must be between 0 and 1, got {v}"));
-        }
-    }
-    if let Some(l) = a.lease_s {
-        if !(l > 0.0 && l.is_finite()) {
-            return usage(format!("--lease-s must be a positive number of seconds, got {l}"));
-        }
-    }
-    if a.resume && a.out.is_none() {
-        return usage("--resume continues OUT.exr.journal and needs --out");
-    }
-    let plan = super::farm_args::farm_plan(&a.farm)?;
-    let (atm, bundle) = match Atmosphere::load_bundle(&a.atmosphere) {
-        Ok(x) => x,
-        Err(e) => {
-            eprintln!("{e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
-    };
-    let settings = Settings {
+    })
+}
+
+/// The render's settings from the checked flags.
+fn settings(a: &RenderArgs, camera: Camera, width: usize, height: usize) -> Settings {
+    Settings {
         spectral: SpectralSettings {
             spectral_nm: a.spectral_nm.clone(),
             xyz: !a.no_xyz,
@@ -287,19 +386,22 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
                 SingleArg::Quadrature => SingleScatter::Quadrature,
                 SingleArg::MonteCarlo => SingleScatter::MonteCarlo,
             },
-            fog: a.fog_distance_km.map(|d| Fog { max_distance_km: d, ceiling_km: a.fog_ceiling_km, shadowed: a.shadowed_fog }),
+            fog: a.fog_distance_km.map(|d| Fog {
+                max_distance_km: d,
+                ceiling_km: a.fog_ceiling_km,
+                shadowed: a.shadowed_fog,
+            }),
         },
-    };
-    if let (Some(_), Err(e)) = (settings.view.fog, settings.view.check()) {
-        return usage(e);
     }
-    let cancel = Arc::new(AtomicBool::new(false));
-    {
-        let c = cancel.clone();
-        let _ = ctrlc::set_handler(move || c.store(true, Ordering::SeqCst));
-    }
-    let threads = a.threads.filter(|&t| t > 0).unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
-    let start = Instant::now();
+}
+
+/// The farm's workers and options (the embedded worker on `threads` cores
+/// without a farm plan), with the progress view listening to its events.
+fn farm_options(
+    a: &RenderArgs,
+    plan: Option<(Vec<WorkerSpec>, Options)>,
+    threads: usize,
+) -> ((Vec<WorkerSpec>, Options), super::progress::Style, super::progress::View) {
     let (workers, mut opts) = match plan {
         Some((w, o)) => (w, o),
         None => (vec![WorkerSpec::Local { threads }], Options::default()),
@@ -317,31 +419,52 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     {
         opts.faults.kill_after_columns = a.fault_kill_after_columns;
     }
-    // The optics are prepared once, in the session; a farm job carries
-    // them, so every worker renders with the same numbers whatever its
-    // maths library.
-    let session = {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
-        let cache = MieCache::from_env();
-        let steps = Scene::steps(&atm, &settings.spectral);
-        let prep = ProgressBar::new(steps as u64);
-        prep.set_style(ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}").unwrap().progress_chars("=> "));
-        if style == super::progress::Style::Lines {
-            eprintln!("sky render: preparing the optics at {steps} wavelengths");
-        }
-        let optics = OpticsCache::default();
-        let s = pool.install(|| Session::new(atm, bundle, settings.spectral.clone(), &optics, &cache, workers, opts, &|| prep.inc(1)));
-        prep.finish_and_clear();
-        if style == super::progress::Style::Lines {
-            eprintln!("sky render: optics prepared in {:.1} s", start.elapsed().as_secs_f64());
-        }
-        s
-    };
-    let atm = &session.atmosphere;
-    let prep_s = start.elapsed().as_secs_f64();
-    let job = session.job(&settings.view);
-    // The journal next to the output: every accepted column, synced.
-    let (journal, resumed) = match &a.out {
+    ((workers, opts), style, view)
+}
+
+/// The session: the optics prepared once; a farm job carries them, so
+/// every worker renders with the same numbers whatever its maths library.
+fn prepare_session(
+    threads: usize,
+    atm: Atmosphere,
+    bundle: Bundle,
+    settings: &Settings,
+    (workers, opts): (Vec<WorkerSpec>, Options),
+    style: super::progress::Style,
+    start: Instant,
+) -> Result<Session> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let cache = MieCache::from_env();
+    let steps = Scene::steps(&atm, &settings.spectral);
+    let prep = ProgressBar::new(steps as u64);
+    prep.set_style(
+        ProgressStyle::with_template("optics [{bar:30}] {pos}/{len} wavelengths, eta {eta}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
+    if style == super::progress::Style::Lines {
+        eprintln!("sky render: preparing the optics at {steps} wavelengths");
+    }
+    let optics = OpticsCache::default();
+    let s = pool.install(|| {
+        Session::new(atm, bundle, settings.spectral.clone(), &optics, &cache, workers, opts, &|| prep.inc(1))
+    });
+    prep.finish_and_clear();
+    if style == super::progress::Style::Lines {
+        eprintln!("sky render: optics prepared in {:.1} s", start.elapsed().as_secs_f64());
+    }
+    Ok(s)
+}
+
+/// The journal next to --out, created or (with --resume) continued, and
+/// the columns it already holds.
+fn open_journal(
+    a: &RenderArgs,
+    job: &FarmJob,
+    width: usize,
+    height: usize,
+) -> Result<(Option<journal::Journal>, BTreeMap<u32, Tile>)> {
+    Ok(match &a.out {
         None => (None, BTreeMap::new()),
         Some(o) => {
             let jp = journal::path_for(o);
@@ -349,141 +472,24 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
             if a.resume && jp.exists() {
                 let (j, cols) = journal::Journal::resume(&jp, &header)?;
                 if !a.json_progress {
-                    eprintln!("sky render: resuming {}: {} of {width} columns already rendered", jp.display(), cols.len());
+                    eprintln!(
+                        "sky render: resuming {}: {} of {width} columns already rendered",
+                        jp.display(),
+                        cols.len()
+                    );
                 }
                 (Some(j), cols)
             } else {
                 if a.resume {
                     eprintln!("sky render: --resume: there is no {}; rendering from the start", jp.display());
                 } else if jp.exists() {
-                    eprintln!("sky render: replacing {} from an earlier run (use --resume to continue it)", jp.display());
+                    eprintln!(
+                        "sky render: replacing {} from an earlier run (use --resume to continue it)",
+                        jp.display()
+                    );
                 }
                 (Some(journal::Journal::create(&jp, &header)?), BTreeMap::new())
             }
         }
-    };
-    let journal_path = journal.as_ref().map(|j| j.path().to_path_buf());
-    let t0 = Instant::now();
-    let outcome = session.render(job.clone(), resumed, journal, cancel.clone());
-    view.finish();
-    let rendered = match outcome {
-        Ok(r) => r,
-        Err(FarmError::Cancelled) => {
-            match &journal_path {
-                Some(j) => eprintln!("sky render: cancelled; no image was written ({} keeps the finished columns: --resume continues)", j.display()),
-                None => eprintln!("sky render: cancelled; nothing was written"),
-            }
-            return Ok(ExitCode::from(130));
-        }
-        Err(e) => {
-            eprintln!("sky render: {e}");
-            return Ok(ExitCode::from(EXIT_INVALID));
-        }
-    };
-    let n = width * height;
-    let image = rendered.image;
-    let farm_stats = rendered.stats;
-    let render_s = t0.elapsed().as_secs_f64();
-    let taken: f64 = image.pixels.iter().map(|p| p.samples as f64).sum();
-    let paths_cut: u64 = image.pixels.iter().map(|p| p.paths_cut as u64).sum();
-    let samples = taken * (1 + settings.spectral.spectral_nm.len()) as f64;
-    let camera_desc = match &settings.view.camera {
-        Camera::Equirect => "equirect".to_string(),
-        Camera::Fisheye => "fisheye".to_string(),
-        Camera::Pinhole { azimuth_deg, elevation_deg, fov_deg } => format!("pinhole azimuth {azimuth_deg} deg, elevation {elevation_deg} deg, fov {fov_deg} deg"),
-        Camera::Directions(_) => "directions".to_string(),
-        Camera::Lut { mapping, .. } => format!(
-            "lut ({} mapping, threshold sun zenith {:.1} deg; u = heading/azimuth from the sun over pi, v as in the talk's uvToWorldSpaceDirection)",
-            if mapping.sun_centred() { "sun-centred" } else { "latitude-longitude" },
-            mapping.threshold_deg
-        ),
-        Camera::LutStrip { mappings, .. } => format!("a strip of {} lut slices", mappings.len()),
-    };
-    let metadata = vec![
-        ("version".to_string(), sky::VERSION.to_string()),
-        ("camera".to_string(), camera_desc),
-        ("atmosphere".to_string(), atm.path.display().to_string()),
-        ("atmosphere_hash".to_string(), atm.content_hash.clone()),
-        ("sun_zenith_deg".to_string(), a.sun_zenith_deg.to_string()),
-        ("sun_azimuth_deg".to_string(), a.sun_azimuth_deg.to_string()),
-        ("altitude_m".to_string(), a.altitude_m.to_string()),
-        ("spp".to_string(), a.spp.to_string()),
-        ("max_rel_error".to_string(), a.max_rel_error.map(|e| e.to_string()).unwrap_or_else(|| "none".to_string())),
-        ("seed".to_string(), a.seed.to_string()),
-        ("band_nm".to_string(), a.band_nm.to_string()),
-        ("denoised".to_string(), a.denoise.to_string()),
-        ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2); spectral: W m^-2 sr^-1 nm^-1".to_string()),
-    ];
-    let (image, noisy) = if a.denoise {
-        let d = render::denoise::Denoise::default().apply(&image);
-        (d, Some(image))
-    } else {
-        (image, None)
-    };
-    if let Some(o) = &a.out {
-        output::write_exr(o, &image, noisy.as_ref(), settings.spectral.xyz, &settings.spectral.spectral_nm, &metadata).with_context(|| format!("writing {}", o.display()))?;
-        if let Some(j) = &journal_path {
-            let _ = std::fs::remove_file(j);
-        }
-    }
-    if let Some(p) = &a.png {
-        let sun_xyz = sky::spectrum::spectrum_to_xyz(&atm.sun.irradiance_w_m2_nm);
-        output::write_png(p, &image, a.exposure_ev, Some(sun_xyz)).with_context(|| format!("writing {}", p.display()))?;
-    }
-    if a.json {
-        let mut v = json!({
-            "atmosphere": atm.path.display().to_string(),
-            "atmosphere_hash": atm.content_hash,
-            "width": width, "height": height, "spp": a.spp, "seed": a.seed,
-            "mean_samples_per_pixel": taken / n as f64,
-            "sun_zenith_deg": a.sun_zenith_deg, "sun_azimuth_deg": a.sun_azimuth_deg,
-            "prepare_seconds": prep_s, "render_seconds": render_s,
-            "paths_per_second": samples / render_s.max(1e-9),
-            "paths_cut": paths_cut,
-            "y_relative_stderr": relative_stderr_summary(&image),
-            "spectral_nm": settings.spectral.spectral_nm,
-            "farm": farm_stats,
-        });
-        if let Camera::Directions(list) = &settings.view.camera {
-            v["directions"] = json!(list
-                .iter()
-                .zip(&image.pixels)
-                .map(|((z, az), p)| json!({
-                    "zenith_deg": z, "azimuth_deg": az,
-                    "xyz": p.xyz, "xyz_stderr": p.xyz_stderr,
-                    "radiance_w_m2_sr_nm": p.spectral, "radiance_stderr_w_m2_sr_nm": p.spectral_stderr,
-                }))
-                .collect::<Vec<_>>());
-        }
-        outln!("{}", serde_json::to_string_pretty(&v)?);
-    } else if a.json_progress {
-        outln!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
-    } else {
-        eprintln!("rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)", width, height, taken / n as f64, render_s, samples / render_s.max(1e-9), prep_s);
-    }
-    if paths_cut > 0 && !a.json {
-        eprintln!("sky render: warning: {paths_cut} paths were cut at the limit of {} vertices (the image is biased low where they were)", render::tracer::MAX_VERTICES);
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// Median, 90th percentile and maximum over the lit pixels of the relative
-/// standard error of Y (of the first spectral line without XYZ), and the
-/// largest Y: how converged a render is, at a glance.
-fn relative_stderr_summary(image: &render::Image) -> serde_json::Value {
-    let mut rel: Vec<f64> = Vec::new();
-    let mut y_max: f64 = 0.0;
-    for p in &image.pixels {
-        let (v, se) = if p.xyz[1] > 0.0 { (p.xyz[1], p.xyz_stderr[1]) } else { (p.spectral.first().copied().unwrap_or(0.0), p.spectral_stderr.first().copied().unwrap_or(0.0)) };
-        if v > 0.0 {
-            rel.push(se / v);
-            y_max = y_max.max(v);
-        }
-    }
-    if rel.is_empty() {
-        return serde_json::Value::Null;
-    }
-    rel.sort_by(f64::total_cmp);
-    let at = |q: f64| rel[((rel.len() - 1) as f64 * q).round() as usize];
-    json!({ "median": at(0.5), "p90": at(0.9), "max": at(1.0), "largest_value": y_max })
+    })
 }

@@ -79,7 +79,8 @@ pub struct WorkerArgs {
 fn parse_window(s: &str) -> Result<(u32, u32), String> {
     let hm = |t: &str| -> Result<u32, String> {
         let (h, m) = t.trim().split_once(':').ok_or_else(|| format!("`{t}`: expected HH:MM"))?;
-        let (h, m): (u32, u32) = (h.parse().map_err(|_| format!("`{t}`: bad hour"))?, m.parse().map_err(|_| format!("`{t}`: bad minute"))?);
+        let (h, m): (u32, u32) =
+            (h.parse().map_err(|_| format!("`{t}`: bad hour"))?, m.parse().map_err(|_| format!("`{t}`: bad minute"))?);
         if h > 23 || m > 59 {
             return Err(format!("`{t}`: not a time of day"));
         }
@@ -144,7 +145,9 @@ impl OwnerLoad {
 pub fn run(a: WorkerArgs) -> Result<ExitCode> {
     let addr: SocketAddr = match a.listen.parse() {
         Ok(x) => x,
-        Err(_) => return usage(format!("--listen {}: expected HOST:PORT with a numeric host, e.g. 0.0.0.0:7878", a.listen)),
+        Err(_) => {
+            return usage(format!("--listen {}: expected HOST:PORT with a numeric host, e.g. 0.0.0.0:7878", a.listen))
+        }
     };
     if !(a.owner_load_limit > 0.0 && a.owner_load_limit <= 1.0) {
         return usage(format!("--owner-load-limit must be in (0, 1], got {}", a.owner_load_limit));
@@ -164,7 +167,13 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
     };
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let threads = a.threads.filter(|&t| t > 0).unwrap_or((cores - 1).max(1));
-    let name = a.name.clone().unwrap_or_else(|| std::fs::read_to_string("/etc/hostname").ok().map(|h| h.trim().to_string()).filter(|h| !h.is_empty()).unwrap_or_else(|| "worker".into()));
+    let name = a.name.clone().unwrap_or_else(|| {
+        std::fs::read_to_string("/etc/hostname")
+            .ok()
+            .map(|h| h.trim().to_string())
+            .filter(|h| !h.is_empty())
+            .unwrap_or_else(|| "worker".into())
+    });
     // Lower our priority before any thread starts: threads inherit it.
     // SAFETY: setpriority on our own process.
     #[cfg(unix)]
@@ -208,7 +217,13 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
     rt.block_on(serve(shared, addr, tls, a.schedule.clone(), a.owner_load_limit))
 }
 
-async fn serve(shared: Arc<Shared>, addr: SocketAddr, tls: Option<tonic::transport::ServerTlsConfig>, schedule: Vec<(u32, u32)>, load_limit: f64) -> Result<ExitCode> {
+async fn serve(
+    shared: Arc<Shared>,
+    addr: SocketAddr,
+    tls: Option<tonic::transport::ServerTlsConfig>,
+    schedule: Vec<(u32, u32)>,
+    load_limit: f64,
+) -> Result<ExitCode> {
     let listener = match tokio::net::TcpListener::bind(addr).await {
         Ok(l) => l,
         Err(e) => {
@@ -298,7 +313,11 @@ async fn serve(shared: Arc<Shared>, addr: SocketAddr, tls: Option<tonic::transpo
     use std::io::Write;
     let _ = std::io::stdout().flush();
     let incoming = tokio_stream::wrappers::TcpListenerStream::new(listener);
-    builder.add_service(worker::server(shared)).serve_with_incoming_shutdown(incoming, shutdown).await.context("serving")?;
+    builder
+        .add_service(worker::server(shared))
+        .serve_with_incoming_shutdown(incoming, shutdown)
+        .await
+        .context("serving")?;
     eprintln!("sky worker {name}: stopped");
     Ok(ExitCode::SUCCESS)
 }

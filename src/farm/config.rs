@@ -53,7 +53,9 @@ impl FarmFile {
         let mut f: FarmFile = toml::from_str(&text).map_err(|e| {
             let line = e.span().map(|s| text[..s.start.min(text.len())].bytes().filter(|&b| b == b'\n').count() + 1);
             match line {
-                Some(l) => FarmFileError { path: path.to_path_buf(), message: format!("line {l}: {}", e.message().trim()) },
+                Some(l) => {
+                    FarmFileError { path: path.to_path_buf(), message: format!("line {l}: {}", e.message().trim()) }
+                }
                 None => err(e.message().trim().to_string()),
             }
         })?;
@@ -97,7 +99,8 @@ pub fn worker_uri(address: &str, tls: bool) -> String {
 
 /// Reads a token file: its first line, trimmed; an empty token is an error.
 pub fn read_token(path: &Path) -> Result<String, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read the farm token: {e}", path.display()))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read the farm token: {e}", path.display()))?;
     let t = text.lines().next().unwrap_or("").trim().to_string();
     if t.is_empty() {
         return Err(format!("{}: the farm token file is empty", path.display()));
@@ -113,7 +116,11 @@ mod tests {
     fn farm_files_parse_and_errors_name_the_line() {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("farm.toml");
-        std::fs::write(&p, "token_file = \"t\"\nverify_fraction = 0.1\n[[worker]]\nname = \"a\"\naddress = \"10.0.0.1:7878\"\n").unwrap();
+        std::fs::write(
+            &p,
+            "token_file = \"t\"\nverify_fraction = 0.1\n[[worker]]\nname = \"a\"\naddress = \"10.0.0.1:7878\"\n",
+        )
+        .unwrap();
         let f = FarmFile::load(&p).unwrap();
         assert_eq!(f.workers.len(), 1);
         assert_eq!(f.token_file.unwrap(), dir.path().join("t"));

@@ -124,7 +124,14 @@ impl Shared {
 }
 
 /// Renders `job` across `workers` once: a [`Farm`] for one render.
-pub async fn run(job: Arc<FarmJob>, workers: Vec<WorkerSpec>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
+pub async fn run(
+    job: Arc<FarmJob>,
+    workers: Vec<WorkerSpec>,
+    resumed: BTreeMap<u32, proto::Tile>,
+    journal: Option<Journal>,
+    opts: Options,
+    cancel: Arc<AtomicBool>,
+) -> Result<Outcome, FarmError> {
     Farm::new(workers).render(job, resumed, journal, &opts, cancel).await
 }
 
@@ -147,14 +154,26 @@ struct Slot {
 
 impl Farm {
     pub fn new(workers: Vec<WorkerSpec>) -> Farm {
-        Farm { slots: workers.into_iter().map(|spec| Slot { name: spec.name(), spec, backend: None, quarantined: None }).collect() }
+        Farm {
+            slots: workers
+                .into_iter()
+                .map(|spec| Slot { name: spec.name(), spec, backend: None, quarantined: None })
+                .collect(),
+        }
     }
 
     /// Renders `job` (the embedded worker renders with the job's prepared
     /// scene, remote ones get its optics when they lack them); `resumed`
     /// holds columns from a journal; `journal`, if any, receives every
     /// newly accepted column. `cancel` stops the render (the journal stays).
-    pub async fn render(&mut self, job: Arc<FarmJob>, resumed: BTreeMap<u32, proto::Tile>, journal: Option<Journal>, opts: &Options, cancel: Arc<AtomicBool>) -> Result<Outcome, FarmError> {
+    pub async fn render(
+        &mut self,
+        job: Arc<FarmJob>,
+        resumed: BTreeMap<u32, proto::Tile>,
+        journal: Option<Journal>,
+        opts: &Options,
+        cancel: Arc<AtomicBool>,
+    ) -> Result<Outcome, FarmError> {
         let mut out = self.render_parts(vec![FarmPart { job, resumed, journal }], opts, cancel).await?;
         Ok(Outcome { columns: out.parts.pop().expect("one part"), stats: out.stats })
     }
@@ -163,7 +182,12 @@ impl Farm {
     /// columns, in their order: a worker done with the columns of one job
     /// goes on to the next without waiting for the slowest column of the
     /// first, and gets each job's optics only if it lacks them.
-    pub async fn render_parts(&mut self, parts: Vec<FarmPart>, opts: &Options, cancel: Arc<AtomicBool>) -> Result<PartsOutcome, FarmError> {
+    pub async fn render_parts(
+        &mut self,
+        parts: Vec<FarmPart>,
+        opts: &Options,
+        cancel: Arc<AtomicBool>,
+    ) -> Result<PartsOutcome, FarmError> {
         let jobs: Vec<Arc<FarmJob>> = parts.iter().map(|p| p.job.clone()).collect();
         let inits = parts
             .into_iter()
@@ -173,7 +197,15 @@ impl Farm {
                 let lines = s.spectral.spectral_nm.len() as u32;
                 let mut columns: Vec<Option<Vec<PixelResult>>> = vec![None; width as usize];
                 for (c, t) in &resumed {
-                    let want = tile::Expect { job_hash: &job.hash, task_id: t.task_id, first_column: *c, columns: 1, height, lines, spp: s.view.spp };
+                    let want = tile::Expect {
+                        job_hash: &job.hash,
+                        task_id: t.task_id,
+                        first_column: *c,
+                        columns: 1,
+                        height,
+                        lines,
+                        spp: s.view.spp,
+                    };
                     if let Ok(mut cols) = tile::decode(t, &want) {
                         if (*c as usize) < columns.len() {
                             columns[*c as usize] = cols.pop();
@@ -192,8 +224,17 @@ impl Farm {
                 }
             }
         }
-        let wstates = self.slots.iter().map(|slot| WState::new(slot.name.clone(), slot.spec.address(), slot.quarantined.clone())).collect();
-        let shared = Arc::new(Shared { sched: Mutex::new(Sched::new(inits, wstates, opts.clone())), changed: Notify::new(), cancel: cancel.clone(), epoch: Instant::now() });
+        let wstates = self
+            .slots
+            .iter()
+            .map(|slot| WState::new(slot.name.clone(), slot.spec.address(), slot.quarantined.clone()))
+            .collect();
+        let shared = Arc::new(Shared {
+            sched: Mutex::new(Sched::new(inits, wstates, opts.clone())),
+            changed: Notify::new(),
+            cancel: cancel.clone(),
+            epoch: Instant::now(),
+        });
         let leases = tokio::spawn(watch_leases(shared.clone(), opts.lease));
         let progress = tokio::spawn(report_progress(shared.clone(), opts.events.clone(), opts.progress_period));
         let mut drivers = Vec::new();
@@ -247,7 +288,14 @@ pub struct FarmPart {
 /// One worker's loop: take a task, run it, report, until the job is done;
 /// gives the backend (its connection) back for the next render. `named`:
 /// the farm file names the worker (else it goes by its Hello's name).
-async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>, jobs: Vec<Arc<FarmJob>>, opts: Options) -> Backend {
+async fn drive(
+    w: usize,
+    mut backend: Backend,
+    named: bool,
+    shared: Arc<Shared>,
+    jobs: Vec<Arc<FarmJob>>,
+    opts: Options,
+) -> Backend {
     let (inflight, preparing, traffic) = {
         let s = shared.sched.lock().unwrap();
         (s.workers[w].inflight_pixels.clone(), s.workers[w].preparing.clone(), s.workers[w].traffic.clone())
@@ -314,7 +362,9 @@ async fn drive(w: usize, mut backend: Backend, named: bool, shared: Arc<Shared>,
             }
             Assign::Task(t) => {
                 let beat = || shared.sched.lock().unwrap().heard(w, t.id, shared.now());
-                let result = backend.run(&t, &jobs[t.part], (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel).await;
+                let result = backend
+                    .run(&t, &jobs[t.part], (&inflight, &preparing), &traffic, opts.lease, &beat, &shared.cancel)
+                    .await;
                 preparing.store(false, Ordering::Relaxed);
                 {
                     let mut s = shared.sched.lock().unwrap();
@@ -352,7 +402,11 @@ async fn wait_or_done(shared: &Shared, w: usize, d: Duration) -> bool {
     let notified = shared.changed.notified();
     {
         let s = shared.sched.lock().unwrap();
-        if s.complete() || s.fatal.is_some() || s.workers[w].quarantined.is_some() || shared.cancel.load(Ordering::Relaxed) {
+        if s.complete()
+            || s.fatal.is_some()
+            || s.workers[w].quarantined.is_some()
+            || shared.cancel.load(Ordering::Relaxed)
+        {
             return true;
         }
     }
@@ -386,7 +440,8 @@ async fn report_progress(shared: Arc<Shared>, sink: Option<EventSink>, period: D
         // Columns of several jobs may differ in height: the mean one.
         let height = total_pixels as f64 / stats.columns_total.max(1) as f64;
         // ETA from each worker's measured speed (columns per second).
-        let speed: f64 = stats.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.columns_per_s).sum::<f64>() * height;
+        let speed: f64 =
+            stats.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.columns_per_s).sum::<f64>() * height;
         let left = total_pixels.saturating_sub(pixels) as f64;
         let elapsed_s = started.elapsed().as_secs_f64();
         sink.emit(&FarmEvent::Progress(Progress {

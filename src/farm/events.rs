@@ -64,11 +64,17 @@ impl std::fmt::Debug for EventSink {
 /// Why no worker renders, if none can: every one is paused, quarantined or
 /// unreachable (None while one renders, connects or waits for work).
 pub fn stalled(workers: &[WorkerStats]) -> Option<String> {
-    let blocked = |w: &WorkerStats| w.quarantined.is_some() || w.state.starts_with("paused") || w.state == "unreachable";
+    let blocked =
+        |w: &WorkerStats| w.quarantined.is_some() || w.state.starts_with("paused") || w.state == "unreachable";
     if workers.is_empty() || !workers.iter().all(blocked) {
         return None;
     }
-    let why: Vec<String> = workers.iter().map(|w| format!("{}: {}", w.name, w.quarantined.as_ref().map_or(w.state.clone(), |q| format!("quarantined ({q})")))).collect();
+    let why: Vec<String> = workers
+        .iter()
+        .map(|w| {
+            format!("{}: {}", w.name, w.quarantined.as_ref().map_or(w.state.clone(), |q| format!("quarantined ({q})")))
+        })
+        .collect();
     Some(format!("no worker can render: {}", why.join("; ")))
 }
 
@@ -77,20 +83,40 @@ mod tests {
     use super::*;
 
     fn worker(name: &str, state: &str, quarantined: Option<&str>) -> WorkerStats {
-        WorkerStats { name: name.into(), address: "h:1".into(), state: state.into(), quarantined: quarantined.map(String::from), ..Default::default() }
+        WorkerStats {
+            name: name.into(),
+            address: "h:1".into(),
+            state: state.into(),
+            quarantined: quarantined.map(String::from),
+            ..Default::default()
+        }
     }
 
     #[test]
     fn a_render_says_why_it_waits() {
         assert_eq!(stalled(&[worker("a", "rendering", None), worker("b", "paused (owner load)", None)]), None);
-        let s = stalled(&[worker("a", "quarantined", Some("differed bit for bit")), worker("b", "paused (schedule)", None)]).unwrap();
+        let s = stalled(&[
+            worker("a", "quarantined", Some("differed bit for bit")),
+            worker("b", "paused (schedule)", None),
+        ])
+        .unwrap();
         assert!(s.contains("a: quarantined (differed bit for bit)") && s.contains("b: paused (schedule)"), "{s}");
         assert_eq!(stalled(&[]), None);
     }
 
     #[test]
     fn progress_serialises_as_one_tagged_line() {
-        let p = FarmEvent::Progress(Progress { elapsed_s: 1.0, samples_per_s: 2.0, pixels_done: 3, pixels_total: 4, columns_done: 1, columns_total: 2, eta_s: None, workers: vec![], stalled: None });
+        let p = FarmEvent::Progress(Progress {
+            elapsed_s: 1.0,
+            samples_per_s: 2.0,
+            pixels_done: 3,
+            pixels_total: 4,
+            columns_done: 1,
+            columns_total: 2,
+            eta_s: None,
+            workers: vec![],
+            stalled: None,
+        });
         let v: serde_json::Value = serde_json::to_value(&p).unwrap();
         assert_eq!(v["event"], "progress");
         assert_eq!(v["pixels_done"], 3);

@@ -3,7 +3,7 @@
 //!
 //! - the optics: the atmosphere file with every data file it reads, the
 //!   spectral settings and the prepared [`Scene`], named by their optics
-//!   hash ([`crate::session::optics_hash`]) and sent to a worker only when
+//!   hash ([`optics_hash`]) and sent to a worker only when
 //!   it lacks them;
 //! - the view (camera, size, sun, samples), serde JSON, with every task.
 //!
@@ -14,6 +14,14 @@ use super::proto;
 use crate::atmosphere::{Atmosphere, Bundle};
 use crate::render::{Scene, Settings, SpectralSettings, View};
 use std::sync::{Arc, OnceLock};
+
+/// The name of an atmosphere's optics for one spectral setting: BLAKE3 of
+/// the atmosphere's content hash (the file and every data file it reads)
+/// and the spectral settings.
+pub fn optics_hash(atm: &Atmosphere, spectral: &SpectralSettings) -> String {
+    let key = serde_json::json!({ "atmosphere": atm.content_hash, "spectral": spectral, "build": crate::VERSION, "render_source": crate::RENDER_SOURCE });
+    blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum JobError {
@@ -37,7 +45,7 @@ pub enum JobError {
 /// (for the embedded worker) and, encoded on first use, the message for
 /// remote workers.
 pub struct Optics {
-    /// [`crate::session::optics_hash`] of the atmosphere and spectral settings.
+    /// [`optics_hash`] of the atmosphere and spectral settings.
     pub hash: String,
     pub scene: Arc<Scene>,
     bundle: Bundle,
@@ -46,7 +54,7 @@ pub struct Optics {
 
 impl Optics {
     pub fn new(atm: &Atmosphere, bundle: Bundle, scene: Arc<Scene>) -> Optics {
-        Optics { hash: crate::session::optics_hash(atm, &scene.spectral), scene, bundle, message: OnceLock::new() }
+        Optics { hash: optics_hash(atm, &scene.spectral), scene, bundle, message: OnceLock::new() }
     }
 
     /// The optics message (with the prepared scene), encoded once.
@@ -63,7 +71,11 @@ pub fn message(bundle: &Bundle, spectral: &SpectralSettings, scene: Option<&Scen
         build_version: super::build_version(),
         atmosphere_name: bundle.name.clone(),
         atmosphere_toml: bundle.text.clone(),
-        files: bundle.files.iter().map(|(name, content)| proto::DataFile { name: name.clone(), content: content.clone() }).collect(),
+        files: bundle
+            .files
+            .iter()
+            .map(|(name, content)| proto::DataFile { name: name.clone(), content: content.clone() })
+            .collect(),
         spectral_json: serde_json::to_string(spectral).expect("spectral settings serialise"),
         scene: scene.map(|s| postcard::to_stdvec(s).expect("scenes serialise")).unwrap_or_default(),
     }
@@ -100,17 +112,25 @@ pub fn job_hash(optics_hash: &str, view_json: &str) -> String {
 /// Checks versions and unpacks optics: the atmosphere (from their own
 /// files), the spectral settings, and the prepared scene if they carry it;
 /// their hash must be the one claimed.
-pub fn open_optics(o: &proto::Optics, claimed_hash: &str) -> Result<(Atmosphere, SpectralSettings, Option<Scene>), JobError> {
+pub fn open_optics(
+    o: &proto::Optics,
+    claimed_hash: &str,
+) -> Result<(Atmosphere, SpectralSettings, Option<Scene>), JobError> {
     if o.protocol_version != super::PROTOCOL_VERSION {
         return Err(JobError::Protocol { theirs: o.protocol_version, ours: super::PROTOCOL_VERSION });
     }
     if o.build_version != super::build_version() {
         return Err(JobError::Build { theirs: o.build_version.clone(), ours: super::build_version() });
     }
-    let spectral: SpectralSettings = serde_json::from_str(&o.spectral_json).map_err(|e| JobError::Spectral(e.to_string()))?;
-    let bundle = Bundle { name: o.atmosphere_name.clone(), text: o.atmosphere_toml.clone(), files: o.files.iter().map(|f| (f.name.clone(), f.content.clone())).collect() };
+    let spectral: SpectralSettings =
+        serde_json::from_str(&o.spectral_json).map_err(|e| JobError::Spectral(e.to_string()))?;
+    let bundle = Bundle {
+        name: o.atmosphere_name.clone(),
+        text: o.atmosphere_toml.clone(),
+        files: o.files.iter().map(|f| (f.name.clone(), f.content.clone())).collect(),
+    };
     let atm = Atmosphere::from_bundle(&bundle).map_err(|e| JobError::Atmosphere(e.to_string()))?;
-    let actual = crate::session::optics_hash(&atm, &spectral);
+    let actual = optics_hash(&atm, &spectral);
     if actual != claimed_hash {
         return Err(JobError::Hash { claimed: claimed_hash.to_string(), actual });
     }
@@ -134,7 +154,7 @@ pub fn open_view(view_json: &str) -> Result<View, JobError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::camera::Camera;
+    use crate::directions::camera::Camera;
     use std::path::Path;
 
     #[test]
@@ -144,7 +164,7 @@ mod tests {
         assert!(bundle.files.len() >= 3, "{:?}", bundle.files.keys());
         let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
         s.view.camera = Camera::Fisheye;
-        let hash = crate::session::optics_hash(&atm, &s.spectral);
+        let hash = optics_hash(&atm, &s.spectral);
         let o = message(&bundle, &s.spectral, None);
         let (atm2, spectral, scene) = open_optics(&o, &hash).unwrap();
         assert_eq!(atm2.content_hash, atm.content_hash);
@@ -170,7 +190,7 @@ mod tests {
         let mut sun = s.view.clone();
         sun.sun_zenith_deg = 61.0;
         assert_ne!(job_hash(&hash, &v), job_hash(&hash, &serde_json::to_string(&sun).unwrap()));
-        assert_ne!(job_hash(&hash, &v), job_hash(&crate::session::optics_hash(&atm, &other), &v));
+        assert_ne!(job_hash(&hash, &v), job_hash(&optics_hash(&atm, &other), &v));
         assert!(open_view("{}").is_err());
     }
 

@@ -174,7 +174,17 @@ mod tests {
     use super::*;
 
     fn tile(c: u32) -> proto::Tile {
-        proto::Tile { job_hash: "h".into(), task_id: 1, first_column: c, columns: 1, height: 1, spectral_lines: 0, values: vec![c as f64; 9], samples: vec![4], paths_cut: vec![0] }
+        proto::Tile {
+            job_hash: "h".into(),
+            task_id: 1,
+            first_column: c,
+            columns: 1,
+            height: 1,
+            spectral_lines: 0,
+            values: vec![c as f64; 9],
+            samples: vec![4],
+            paths_cut: vec![0],
+        }
     }
 
     #[test]

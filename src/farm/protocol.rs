@@ -27,7 +27,11 @@ pub(crate) enum TaskError {
 /// [`proto::TaskRefusal`] in its details saying so and why.
 pub fn paused_status(reason: &str) -> Status {
     use prost::Message;
-    let refusal = proto::TaskRefusal { state: WorkerState::Paused as i32, paused_reason: reason.to_string(), ..Default::default() };
+    let refusal = proto::TaskRefusal {
+        state: WorkerState::Paused as i32,
+        paused_reason: reason.to_string(),
+        ..Default::default()
+    };
     Status::with_details(tonic::Code::Unavailable, format!("paused ({reason})"), refusal.encode_to_vec().into())
 }
 
@@ -37,7 +41,11 @@ pub fn paused_status(reason: &str) -> Status {
 pub fn optics_missing_status(optics_hash: &str) -> Status {
     use prost::Message;
     let refusal = proto::TaskRefusal { missing: Missing::Optics as i32, ..Default::default() };
-    Status::with_details(tonic::Code::NotFound, format!("optics {optics_hash} are not held by this worker; send them with the task"), refusal.encode_to_vec().into())
+    Status::with_details(
+        tonic::Code::NotFound,
+        format!("optics {optics_hash} are not held by this worker; send them with the task"),
+        refusal.encode_to_vec().into(),
+    )
 }
 
 /// What a gRPC status means for the task. A paused worker says so in the

@@ -197,7 +197,15 @@ impl Sched {
                 let offset = columns.len() as u32;
                 let width = p.columns.len() as u32;
                 columns.extend(p.columns);
-                Part { job_hash: p.job_hash, height: p.height, lines: p.lines, offset, width, journal: p.journal, busy_core_s: 0.0 }
+                Part {
+                    job_hash: p.job_hash,
+                    height: p.height,
+                    lines: p.lines,
+                    offset,
+                    width,
+                    journal: p.journal,
+                    busy_core_s: 0.0,
+                }
             })
             .collect();
         let width = columns.len() as u32;
@@ -231,33 +239,16 @@ impl Sched {
         self.parts.partition_point(|p| p.offset + p.width <= c)
     }
 
-    /// Pixels in all: every part's columns times its height.
-    pub fn pixels_total(&self) -> u64 {
-        self.parts.iter().map(|p| p.width as u64 * p.height as u64).sum()
-    }
-
-    /// Core-seconds each part's winning tasks took on their workers, in
-    /// all (a basis of sharing a render's cost among its parts).
-    pub fn busy_core_s(&self) -> Vec<f64> {
-        self.parts.iter().map(|p| p.busy_core_s).collect()
-    }
-
     pub fn live_workers(&self) -> usize {
         self.workers.iter().filter(|w| w.quarantined.is_none()).count()
     }
 
     /// Every column rendered (and verified, where picked), nothing running.
     pub fn complete(&self) -> bool {
-        self.pending.is_empty() && self.tasks.is_empty() && self.verify_queue.is_empty() && self.columns.iter().all(Option::is_some)
-    }
-
-    /// Each worker's state and failures, for an error message.
-    pub fn report(&self) -> String {
-        let mut s = String::new();
-        for w in &self.workers {
-            s.push_str(&format!("  {}: {} ({} failures{})\n", w.name, w.state, w.failures, w.quarantined.as_ref().map(|q| format!("; quarantined: {q}")).unwrap_or_default()));
-        }
-        s
+        self.pending.is_empty()
+            && self.tasks.is_empty()
+            && self.verify_queue.is_empty()
+            && self.columns.iter().all(Option::is_some)
     }
 
     /// Columns a worker should take at once: about `task_seconds` of its
@@ -299,29 +290,7 @@ impl Sched {
         if self.fatal.is_some() || self.workers[w].quarantined.is_some() {
             return Assign::Done;
         }
-        // Verifications no live worker but the producer could take are dropped.
-        let live: Vec<usize> = (0..self.workers.len()).filter(|&i| self.workers[i].quarantined.is_none()).collect();
-        let before = self.verify_queue.len();
-        let checks = &self.checks;
-        let mut unresolved = Vec::new();
-        self.verify_queue.retain(|id| {
-            let c = &checks[id];
-            let ok = live.iter().any(|i| !c.excluded.contains(i));
-            if !ok {
-                unresolved.push(*id);
-            }
-            ok
-        });
-        self.stats.columns_unverified += (before - self.verify_queue.len()) as u32;
-        for id in unresolved {
-            // A dispute no third worker can settle: trust the verifier over
-            // the producer (the column is rendered again by someone else).
-            let c = self.checks.remove(&id).unwrap();
-            if let Some((v, _)) = c.disputed {
-                let why = format!("column {} differed bit for bit from {}'s, and no third worker could decide", c.column, self.workers[v].name);
-                self.convict(c.producer, why);
-            }
-        }
+        self.drop_unverifiable();
         if self.complete() {
             return Assign::Done;
         }
@@ -343,7 +312,12 @@ impl Sched {
             return self.new_task(w, start, count, Kind::Render, now);
         }
         // Nothing new: duplicate the oldest task running on someone else.
-        let oldest = self.tasks.iter().filter(|(_, t)| t.kind == Kind::Render && t.runners.len() == 1 && t.runners[0].worker != w).min_by_key(|(_, t)| t.runners[0].started).map(|(&id, _)| id);
+        let oldest = self
+            .tasks
+            .iter()
+            .filter(|(_, t)| t.kind == Kind::Render && t.runners.len() == 1 && t.runners[0].worker != w)
+            .min_by_key(|(_, t)| t.runners[0].started)
+            .map(|(&id, _)| id);
         if let Some(id) = oldest {
             let (runner, stop) = self.runner(w, now);
             let t = self.tasks.get_mut(&id).unwrap();
@@ -354,16 +328,6 @@ impl Sched {
             return Assign::Task(a);
         }
         Assign::Wait
-    }
-
-    fn picked_for_verification(&self, column: u32) -> bool {
-        if self.opts.verify_fraction <= 0.0 {
-            return false;
-        }
-        let p = &self.parts[self.part_of(column)];
-        let h = blake3::hash(format!("{}:{}", p.job_hash, column - p.offset).as_bytes());
-        let u = u64::from_le_bytes(h.as_bytes()[..8].try_into().unwrap()) as f64 / u64::MAX as f64;
-        u < self.opts.verify_fraction
     }
 
     pub fn quarantine(&mut self, w: usize, why: String) {
@@ -393,7 +357,13 @@ impl Sched {
     /// their workers.
     pub fn expire(&mut self, now: Duration) -> Vec<usize> {
         let lease = self.opts.lease;
-        let late: Vec<(u64, usize)> = self.tasks.iter().flat_map(|(&id, t)| t.runners.iter().filter(|r| now.saturating_sub(r.heard) > lease).map(move |r| (id, r.worker))).collect();
+        let late: Vec<(u64, usize)> = self
+            .tasks
+            .iter()
+            .flat_map(|(&id, t)| {
+                t.runners.iter().filter(|r| now.saturating_sub(r.heard) > lease).map(move |r| (id, r.worker))
+            })
+            .collect();
         for &(id, w) in &late {
             let t = &self.tasks[&id];
             let (first, count, render) = (t.first, t.count, t.kind == Kind::Render);
@@ -401,7 +371,11 @@ impl Sched {
                 r.stop.send_replace(Stop::Expired);
             }
             self.release(w, id, false);
-            self.blame(w, TaskError::Failed(format!("silent for the lease of {lease:?} (stalled or gone)")), render.then_some((first, count)));
+            self.blame(
+                w,
+                TaskError::Failed(format!("silent for the lease of {lease:?} (stalled or gone)")),
+                render.then_some((first, count)),
+            );
         }
         late.into_iter().map(|(_, w)| w).collect()
     }
@@ -442,7 +416,14 @@ impl Sched {
                         continue;
                     }
                     let p = &self.parts[k];
-                    accepted.push(tile::encode(&p.job_hash, 0, c - p.offset, p.height, p.lines as usize, std::slice::from_ref(&col)));
+                    accepted.push(tile::encode(
+                        &p.job_hash,
+                        0,
+                        c - p.offset,
+                        p.height,
+                        p.lines as usize,
+                        std::slice::from_ref(&col),
+                    ));
                     self.stats.samples_rendered += col.iter().map(|p| p.samples as u64).sum::<u64>();
                     self.columns[c as usize] = Some(col);
                     self.producer[c as usize] = Some(w);
@@ -457,81 +438,8 @@ impl Sched {
                     }
                 }
             }
-            Kind::Verify { check } => {
-                let Some(chk) = self.checks.remove(&check) else { return };
-                let c = chk.column;
-                // The producer may have been caught meanwhile (its columns
-                // are being rendered again): nothing left to check.
-                if self.producer[c as usize] != Some(chk.producer) {
-                    return;
-                }
-                let Some(mine) = columns.into_iter().next() else { return };
-                let stored = self.columns[c as usize].clone().expect("a produced column");
-                match chk.disputed {
-                    None if bitwise_equal(&stored, &mine) => self.stats.columns_verified += 1,
-                    None => {
-                        self.stats.verify_mismatches += 1;
-                        let third = (0..self.workers.len()).any(|i| self.workers[i].quarantined.is_none() && i != chk.producer && i != w);
-                        if third {
-                            // Two opinions differ: a third worker decides.
-                            self.add_check(Check { column: c, producer: chk.producer, excluded: vec![chk.producer, w], disputed: Some((w, mine)) }, true);
-                        } else {
-                            let why = format!("column {c} differed bit for bit when {} rendered it again (no third worker to decide)", self.workers[w].name);
-                            self.convict(chk.producer, why);
-                        }
-                    }
-                    Some((v, theirs)) => {
-                        let name = self.workers[w].name.clone();
-                        if bitwise_equal(&stored, &mine) {
-                            self.stats.columns_verified += 1;
-                            let why = format!("its rendering of column {c} differed bit for bit from those of {} and {name}", self.workers[chk.producer].name);
-                            self.convict(v, why);
-                        } else if bitwise_equal(&theirs, &mine) {
-                            let why = format!("its column {c} differed bit for bit from those of {} and {name}", self.workers[v].name);
-                            self.convict(chk.producer, why);
-                        } else {
-                            let why = format!("three different renderings of column {c} ({name} was the third)");
-                            self.convict(chk.producer, why.clone());
-                            self.convict(v, why);
-                        }
-                    }
-                }
-            }
+            Kind::Verify { check } => self.finish_verify(w, check, columns),
         }
-    }
-
-    fn add_check(&mut self, c: Check, urgent: bool) {
-        let id = self.next_check;
-        self.next_check += 1;
-        self.checks.insert(id, c);
-        if urgent {
-            self.verify_queue.push_front(id);
-        } else {
-            self.verify_queue.push_back(id);
-        }
-    }
-
-    /// Quarantines a worker caught with a wrong result and renders again
-    /// every column it produced.
-    fn convict(&mut self, w: usize, why: String) {
-        self.quarantine(w, why);
-        let mine: Vec<u32> = (0..self.width).filter(|&i| self.producer[i as usize] == Some(w)).collect();
-        for i in mine {
-            self.columns[i as usize] = None;
-            self.producer[i as usize] = None;
-            self.pending.insert(i);
-            self.stats.columns_rendered -= 1;
-            let k = self.part_of(i);
-            let local = i - self.parts[k].offset;
-            if let Some(j) = &mut self.parts[k].journal {
-                if let Err(e) = j.retract(local) {
-                    self.fatal = Some(e.into());
-                }
-            }
-        }
-        let checks = &self.checks;
-        self.verify_queue.retain(|id| checks[id].producer != w);
-        self.checks.retain(|_, c| c.producer != w);
     }
 
     /// Takes worker `w` off task `id`; the last runner to leave puts the
@@ -587,8 +495,14 @@ impl Sched {
                 let f = self.column_failures.entry(c).or_default();
                 f.insert(w, msg.clone());
                 if f.len() >= self.opts.max_column_failures && self.fatal.is_none() {
-                    let report = f.iter().map(|(&i, m)| format!("  {}: {m}\n", self.workers[i].name)).collect::<String>();
-                    self.fatal = Some(FarmError::ColumnFailed { part, column: c - self.parts[part].offset, workers: f.len(), report });
+                    let report =
+                        f.iter().map(|(&i, m)| format!("  {}: {m}\n", self.workers[i].name)).collect::<String>();
+                    self.fatal = Some(FarmError::ColumnFailed {
+                        part,
+                        column: c - self.parts[part].offset,
+                        workers: f.len(),
+                        report,
+                    });
                 }
             }
         }
@@ -596,50 +510,6 @@ impl Sched {
             let n = self.workers[w].failures;
             self.quarantine(w, format!("{n} failures; the last: {msg}"));
         }
-    }
-
-    /// The figures so far.
-    pub fn snapshot(&self) -> Stats {
-        let mut s = self.stats.clone();
-        s.columns_total = self.width;
-        s.threads = self.workers.iter().filter(|w| w.quarantined.is_none()).map(|w| w.threads).sum();
-        s.workers = self
-            .workers
-            .iter()
-            .map(|w| WorkerStats {
-                name: w.name.clone(),
-                address: w.address.clone(),
-                state: if w.state == "rendering" && w.preparing.load(Ordering::Relaxed) { "preparing job".into() } else { w.state.clone() },
-                tasks_done: w.tasks_done,
-                columns_done: w.columns_done,
-                columns_per_s: w.speed.unwrap_or(0.0),
-                threads: w.threads,
-                failures: w.failures,
-                quarantined: w.quarantined.clone(),
-                connects: w.traffic.connects.load(Ordering::Relaxed),
-                hellos: w.traffic.hellos.load(Ordering::Relaxed),
-                requests: w.traffic.requests.load(Ordering::Relaxed),
-                request_bytes: w.traffic.request_bytes.load(Ordering::Relaxed),
-                optics_sent: w.traffic.optics_sent.load(Ordering::Relaxed),
-                optics_bytes: w.traffic.optics_bytes.load(Ordering::Relaxed),
-            })
-            .collect();
-        s
-    }
-
-    /// Pixels finished: those of accepted columns and of running tasks.
-    pub fn pixels_done(&self) -> u64 {
-        let done: u64 = self.columns.iter().zip(0..).filter(|(c, _)| c.is_some()).map(|(_, i)| self.parts[self.part_of(i)].height as u64).sum();
-        let running: u64 =
-            self.tasks.values().filter(|t| t.kind == Kind::Render).map(|t| t.runners.iter().map(|r| self.workers[r.worker].inflight_pixels.load(Ordering::Relaxed)).max().unwrap_or(0)).sum();
-        done + running
-    }
-
-    /// Columns accepted so far, resumed ones included (what the test-only
-    /// coordinator faults count).
-    #[cfg_attr(not(feature = "fault-injection"), allow(dead_code))]
-    pub fn columns_done(&self) -> u32 {
-        self.stats.columns_resumed + self.stats.columns_rendered
     }
 
     /// The columns of a complete render, each top to bottom, by part.
@@ -652,12 +522,8 @@ impl Sched {
     }
 }
 
-fn bitwise_equal(a: &[PixelResult], b: &[PixelResult]) -> bool {
-    let bits = |p: &PixelResult| -> Vec<u64> {
-        p.xyz.iter().chain(&p.xyz_direct).chain(&p.xyz_stderr).chain(&p.spectral).chain(&p.spectral_stderr).map(|v| v.to_bits()).chain(std::iter::once(p.samples as u64)).collect()
-    };
-    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| bits(x) == bits(y))
-}
+mod progress;
+mod verify;
 
 #[cfg(test)]
 mod tests;

@@ -12,7 +12,16 @@ pub enum TileError {
     #[error("tile covers columns {first}+{columns} of task {task}, the task asked for {want_first}+{want_columns} of task {want_task}")]
     Columns { first: u32, columns: u32, task: u64, want_first: u32, want_columns: u32, want_task: u64 },
     #[error("tile is {got} values, {got_samples} sample counts and {got_cut} cut-path counts, expected {want}, {want_samples} and {want_samples} ({columns} columns x {height} rows, {lines} spectral lines)")]
-    Size { got: usize, got_samples: usize, got_cut: usize, want: usize, want_samples: usize, columns: u32, height: u32, lines: u32 },
+    Size {
+        got: usize,
+        got_samples: usize,
+        got_cut: usize,
+        want: usize,
+        want_samples: usize,
+        columns: u32,
+        height: u32,
+        lines: u32,
+    },
     #[error("tile value {index} is {value}: not a finite, non-negative radiance")]
     Value { index: usize, value: f64 },
     #[error("tile reports {samples} samples for a pixel, more than the job's {spp} spp")]
@@ -26,7 +35,14 @@ pub fn values_per_pixel(lines: usize) -> usize {
 }
 
 /// Packs columns (each top to bottom) into a tile.
-pub fn encode(job_hash: &str, task_id: u64, first_column: u32, height: u32, lines: usize, columns: &[Vec<PixelResult>]) -> proto::Tile {
+pub fn encode(
+    job_hash: &str,
+    task_id: u64,
+    first_column: u32,
+    height: u32,
+    lines: usize,
+    columns: &[Vec<PixelResult>],
+) -> proto::Tile {
     let mut values = Vec::with_capacity(columns.len() * height as usize * values_per_pixel(lines));
     let mut samples = Vec::with_capacity(columns.len() * height as usize);
     let mut paths_cut = Vec::with_capacity(columns.len() * height as usize);
@@ -41,7 +57,17 @@ pub fn encode(job_hash: &str, task_id: u64, first_column: u32, height: u32, line
             paths_cut.push(p.paths_cut);
         }
     }
-    proto::Tile { job_hash: job_hash.to_string(), task_id, first_column, columns: columns.len() as u32, height, spectral_lines: lines as u32, values, samples, paths_cut }
+    proto::Tile {
+        job_hash: job_hash.to_string(),
+        task_id,
+        first_column,
+        columns: columns.len() as u32,
+        height,
+        spectral_lines: lines as u32,
+        values,
+        samples,
+        paths_cut,
+    }
 }
 
 /// What the coordinator expects of a tile.
@@ -62,12 +88,24 @@ pub fn decode(tile: &proto::Tile, want: &Expect) -> Result<Vec<Vec<PixelResult>>
         return Err(TileError::Job { theirs: tile.job_hash.clone(), ours: want.job_hash.to_string() });
     }
     if tile.first_column != want.first_column || tile.columns != want.columns || tile.task_id != want.task_id {
-        return Err(TileError::Columns { first: tile.first_column, columns: tile.columns, task: tile.task_id, want_first: want.first_column, want_columns: want.columns, want_task: want.task_id });
+        return Err(TileError::Columns {
+            first: tile.first_column,
+            columns: tile.columns,
+            task: tile.task_id,
+            want_first: want.first_column,
+            want_columns: want.columns,
+            want_task: want.task_id,
+        });
     }
     let lines = want.lines as usize;
     let per = values_per_pixel(lines);
     let pixels = want.columns as usize * want.height as usize;
-    if tile.height != want.height || tile.spectral_lines != want.lines || tile.values.len() != pixels * per || tile.samples.len() != pixels || tile.paths_cut.len() != pixels {
+    if tile.height != want.height
+        || tile.spectral_lines != want.lines
+        || tile.values.len() != pixels * per
+        || tile.samples.len() != pixels
+        || tile.paths_cut.len() != pixels
+    {
         return Err(TileError::Size {
             got: tile.values.len(),
             got_samples: tile.samples.len(),
@@ -111,7 +149,15 @@ mod tests {
     use super::*;
 
     fn px(v: f64) -> PixelResult {
-        PixelResult { xyz: [v, v + 1.0, v + 2.0], xyz_direct: [0.0; 3], xyz_stderr: [0.1; 3], spectral: vec![v], spectral_stderr: vec![0.01], samples: 8, paths_cut: 0 }
+        PixelResult {
+            xyz: [v, v + 1.0, v + 2.0],
+            xyz_direct: [0.0; 3],
+            xyz_stderr: [0.1; 3],
+            spectral: vec![v],
+            spectral_stderr: vec![0.01],
+            samples: 8,
+            paths_cut: 0,
+        }
     }
 
     #[test]

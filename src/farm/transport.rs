@@ -58,17 +58,31 @@ impl tonic::service::Interceptor for Auth {
 }
 
 /// Connects to a worker: a client with the token and the message limits.
-pub async fn connect(uri: &str, token: Option<&str>, tls: Option<ClientTlsConfig>, timeout: Duration) -> Result<Client, String> {
-    let mut ep = Endpoint::from_shared(uri.to_string()).map_err(|e| format!("bad worker address {uri}: {e}"))?.connect_timeout(timeout).tcp_nodelay(true);
+pub async fn connect(
+    uri: &str,
+    token: Option<&str>,
+    tls: Option<ClientTlsConfig>,
+    timeout: Duration,
+) -> Result<Client, String> {
+    let mut ep = Endpoint::from_shared(uri.to_string())
+        .map_err(|e| format!("bad worker address {uri}: {e}"))?
+        .connect_timeout(timeout)
+        .tcp_nodelay(true);
     if let Some(tls) = tls {
         ep = ep.tls_config(tls).map_err(|e| format!("TLS for {uri}: {e}"))?;
     }
     let channel = ep.connect().await.map_err(|e| format!("cannot connect to {uri}: {}", error_chain(&e)))?;
     let auth = match token {
-        Some(t) => Some(format!("Bearer {t}").parse().map_err(|_| "the farm token has characters not allowed in a header".to_string())?),
+        Some(t) => Some(
+            format!("Bearer {t}")
+                .parse()
+                .map_err(|_| "the farm token has characters not allowed in a header".to_string())?,
+        ),
         None => None,
     };
-    Ok(WorkerClient::with_interceptor(channel, Auth(auth)).max_decoding_message_size(MAX_MESSAGE_BYTES).max_encoding_message_size(MAX_MESSAGE_BYTES))
+    Ok(WorkerClient::with_interceptor(channel, Auth(auth))
+        .max_decoding_message_size(MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(MAX_MESSAGE_BYTES))
 }
 
 fn error_chain(e: &dyn std::error::Error) -> String {
@@ -86,10 +100,20 @@ impl Backend {
     pub fn new(spec: &WorkerSpec) -> Result<Backend, String> {
         Ok(match spec {
             WorkerSpec::Local { threads } => {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(*threads).build().map_err(|e| format!("cannot start {threads} threads: {e}"))?;
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(*threads)
+                    .build()
+                    .map_err(|e| format!("cannot start {threads} threads: {e}"))?;
                 Backend::Local { pool: Arc::new(pool) }
             }
-            WorkerSpec::Remote { uri, .. } => Backend::Remote { uri: uri.clone(), client: None, held: HashSet::new(), hello_name: None, hello_threads: None, greeted: false },
+            WorkerSpec::Remote { uri, .. } => Backend::Remote {
+                uri: uri.clone(),
+                client: None,
+                held: HashSet::new(),
+                hello_name: None,
+                hello_threads: None,
+                greeted: false,
+            },
         })
     }
 
@@ -101,13 +125,19 @@ impl Backend {
             return Ok(None);
         }
         if client.is_none() {
-            let c = connect(uri, opts.token.as_deref(), opts.tls.clone(), Duration::from_secs(5)).await.map_err(TaskError::Failed)?;
+            let c = connect(uri, opts.token.as_deref(), opts.tls.clone(), Duration::from_secs(5))
+                .await
+                .map_err(TaskError::Failed)?;
             Traffic::add(&traffic.connects, 1);
             *client = Some(c);
         }
         let c = client.as_mut().unwrap();
         Traffic::add(&traffic.hellos, 1);
-        let hello = proto::HelloRequest { protocol_version: PROTOCOL_VERSION, build_version: super::build_version(), coordinator: "sky render".into() };
+        let hello = proto::HelloRequest {
+            protocol_version: PROTOCOL_VERSION,
+            build_version: super::build_version(),
+            coordinator: "sky render".into(),
+        };
         let reply = match tokio::time::timeout(opts.lease, c.hello(hello)).await {
             Err(_) => {
                 *client = None;
@@ -126,7 +156,10 @@ impl Backend {
         *hello_threads = Some(reply.threads as usize);
         *held = reply.optics_held.iter().cloned().collect();
         if reply.protocol_version != PROTOCOL_VERSION {
-            return Err(TaskError::Refused(format!("worker {} at {uri} speaks farm protocol {}, this coordinator {PROTOCOL_VERSION}", reply.name, reply.protocol_version)));
+            return Err(TaskError::Refused(format!(
+                "worker {} at {uri} speaks farm protocol {}, this coordinator {PROTOCOL_VERSION}",
+                reply.name, reply.protocol_version
+            )));
         }
         if reply.build_version != super::build_version() {
             return Err(TaskError::Refused(format!(
@@ -191,15 +224,24 @@ impl Backend {
         beat: &(dyn Fn() + Send + Sync),
         stop_all: &AtomicBool,
     ) -> Result<Vec<Vec<PixelResult>>, TaskError> {
-        let stopped = |rx: &tokio::sync::watch::Receiver<Stop>| *rx.borrow() != Stop::Run || stop_all.load(Ordering::Relaxed);
+        let stopped =
+            |rx: &tokio::sync::watch::Receiver<Stop>| *rx.borrow() != Stop::Run || stop_all.load(Ordering::Relaxed);
         let s = &job.settings;
-        let want =
-            tile::Expect { job_hash: &job.hash, task_id: t.id, first_column: t.first, columns: t.count, height: s.view.height as u32, lines: s.spectral.spectral_nm.len() as u32, spp: s.view.spp };
+        let want = tile::Expect {
+            job_hash: &job.hash,
+            task_id: t.id,
+            first_column: t.first,
+            columns: t.count,
+            height: s.view.height as u32,
+            lines: s.spectral.spectral_nm.len() as u32,
+            spp: s.view.spp,
+        };
         match self {
             Backend::Local { pool } => {
                 let flag = Arc::new(AtomicBool::new(false));
                 let work = {
-                    let (pool, scene, flag, inflight, job_settings) = (pool.clone(), job.optics.scene.clone(), flag.clone(), inflight.clone(), s.clone());
+                    let (pool, scene, flag, inflight, job_settings) =
+                        (pool.clone(), job.optics.scene.clone(), flag.clone(), inflight.clone(), s.clone());
                     let (first, count) = (t.first as usize, t.count as usize);
                     tokio::task::spawn_blocking(move || {
                         pool.install(|| {
@@ -226,7 +268,8 @@ impl Backend {
                 };
                 let Some(cols) = cols else { return Err(TaskError::Cancelled) };
                 // Through the wire format and its checks, like a remote tile.
-                let tile = tile::encode(&job.hash, t.id, t.first, s.view.height as u32, s.spectral.spectral_nm.len(), &cols);
+                let tile =
+                    tile::encode(&job.hash, t.id, t.first, s.view.height as u32, s.spectral.spectral_nm.len(), &cols);
                 tile::decode(&tile, &want).map_err(|e| TaskError::Failed(format!("invalid result: {e}")))
             }
             Backend::Remote { uri, client, held, .. } => {
@@ -258,7 +301,11 @@ impl Backend {
                         // what arrives whole, and counts as holding it),
                         // however long the upload: no more than a lease.
                         match tokio::time::timeout(lease, c.render(task)).await {
-                            Err(_) => return Err(TaskError::Failed(format!("{uri}: the task with its optics took longer than the lease of {lease:?}"))),
+                            Err(_) => {
+                                return Err(TaskError::Failed(format!(
+                                    "{uri}: the task with its optics took longer than the lease of {lease:?}"
+                                )))
+                            }
                             Ok(r) => r,
                         }
                     } else {
@@ -274,7 +321,9 @@ impl Backend {
                                 held.remove(optics_hash);
                                 send_optics = true;
                             }
-                            TaskError::OpticsMissing => return Err(TaskError::Failed(format!("{uri}: asked for the optics it was just sent"))),
+                            TaskError::OpticsMissing => {
+                                return Err(TaskError::Failed(format!("{uri}: asked for the optics it was just sent")))
+                            }
                             e => return Err(e),
                         },
                         Ok(r) => break r.into_inner(),

@@ -53,7 +53,9 @@ impl std::fmt::Display for WorkerEvent {
         match self {
             WorkerEvent::Paused { reason } => write!(f, "paused ({reason})"),
             WorkerEvent::Resumed => write!(f, "resumed"),
-            WorkerEvent::RefusedCoordinator { coordinator, theirs, ours } => write!(f, "refused coordinator {coordinator:?}: it speaks farm protocol {theirs}, this worker {ours}"),
+            WorkerEvent::RefusedCoordinator { coordinator, theirs, ours } => {
+                write!(f, "refused coordinator {coordinator:?}: it speaks farm protocol {theirs}, this worker {ours}")
+            }
             WorkerEvent::WrongToken { peer } => write!(f, "refused {peer}: wrong token"),
             WorkerEvent::TaskFailed { peer, message } => write!(f, "task from {peer}: {message}"),
             WorkerEvent::Fault { what } => write!(f, "{what} (fault injection)"),
@@ -130,7 +132,10 @@ pub struct Shared {
 
 impl Shared {
     pub fn new(config: Config) -> Result<Arc<Shared>, rayon::ThreadPoolBuildError> {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(config.threads).thread_name(|i| format!("sky-worker-{i}")).build()?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(config.threads)
+            .thread_name(|i| format!("sky-worker-{i}"))
+            .build()?;
         let (paused_tx, _) = watch::channel(false);
         Ok(Arc::new(Shared {
             optics: MemoryLru::new(config.optics_budget),
@@ -199,7 +204,11 @@ impl Shared {
     /// All under the unpacking lock, which an unpacking takes to unlist
     /// itself only after it has put its optics in the cache: no moment when
     /// arriving optics are in neither place, and no optics unpacked twice.
-    fn optics_for(self: &Arc<Self>, hash: &str, carried: Option<proto::Optics>) -> Option<Result<Arc<Scene>, Unpacking>> {
+    fn optics_for(
+        self: &Arc<Self>,
+        hash: &str,
+        carried: Option<proto::Optics>,
+    ) -> Option<Result<Arc<Scene>, Unpacking>> {
         let mut unpacking = self.unpacking.lock().unwrap();
         if let Some(p) = self.optics.get(hash) {
             return Some(Ok(p));
@@ -238,7 +247,9 @@ pub struct Service {
 type EventStream = Pin<Box<dyn Stream<Item = Result<proto::RenderEvent, Status>> + Send>>;
 
 fn heartbeat(pixels_done: u64, preparing: bool) -> proto::RenderEvent {
-    proto::RenderEvent { event: Some(proto::render_event::Event::Heartbeat(proto::Heartbeat { pixels_done, preparing })) }
+    proto::RenderEvent {
+        event: Some(proto::render_event::Event::Heartbeat(proto::Heartbeat { pixels_done, preparing })),
+    }
 }
 
 #[tonic::async_trait]
@@ -247,7 +258,11 @@ impl Worker for Service {
         let r = request.into_inner();
         let s = &self.shared;
         if r.protocol_version != s.protocol_version() {
-            (s.config.log)(&WorkerEvent::RefusedCoordinator { coordinator: r.coordinator.clone(), theirs: r.protocol_version, ours: s.protocol_version() });
+            (s.config.log)(&WorkerEvent::RefusedCoordinator {
+                coordinator: r.coordinator.clone(),
+                theirs: r.protocol_version,
+                ours: s.protocol_version(),
+            });
         }
         Ok(Response::new(proto::HelloReply {
             protocol_version: s.protocol_version(),
@@ -331,14 +346,24 @@ impl Worker for Service {
 /// claims (of its optics hash and view).
 pub fn check_task(task: &proto::RenderTask, protocol_version: u32) -> Result<(), Status> {
     if task.protocol_version != protocol_version {
-        return Err(Status::failed_precondition(format!("this worker speaks farm protocol {protocol_version}, the task protocol {}", task.protocol_version)));
+        return Err(Status::failed_precondition(format!(
+            "this worker speaks farm protocol {protocol_version}, the task protocol {}",
+            task.protocol_version
+        )));
     }
     if task.build_version != super::build_version() {
-        return Err(Status::failed_precondition(format!("this worker is sky {}, the task is from sky {}: only the same build renders bit-identically", super::build_version(), task.build_version)));
+        return Err(Status::failed_precondition(format!(
+            "this worker is sky {}, the task is from sky {}: only the same build renders bit-identically",
+            super::build_version(),
+            task.build_version
+        )));
     }
     let h = job::job_hash(&task.optics_hash, &task.view_json);
     if h != task.job_hash {
-        return Err(Status::invalid_argument(format!("the task's optics and view hash to {h}, not the job {} it claims", task.job_hash)));
+        return Err(Status::invalid_argument(format!(
+            "the task's optics and view hash to {h}, not the job {} it claims",
+            task.job_hash
+        )));
     }
     Ok(())
 }
@@ -346,7 +371,10 @@ pub fn check_task(task: &proto::RenderTask, protocol_version: u32) -> Result<(),
 /// Unpacks optics a task carries: the atmosphere (from their own files),
 /// the spectral settings and the prepared scene if they have it, checked
 /// against the optics hash the task names.
-pub fn open_optics(o: &proto::Optics, optics_hash: &str) -> Result<(crate::atmosphere::Atmosphere, SpectralSettings, Option<Scene>), Status> {
+pub fn open_optics(
+    o: &proto::Optics,
+    optics_hash: &str,
+) -> Result<(crate::atmosphere::Atmosphere, SpectralSettings, Option<Scene>), Status> {
     job::open_optics(o, optics_hash).map_err(|e| Status::invalid_argument(e.to_string()))
 }
 
@@ -359,7 +387,9 @@ pub fn open_view(view_json: &str) -> Result<View, Status> {
 pub fn task_columns(task: &proto::RenderTask, width: usize) -> Result<(usize, usize), Status> {
     let (first, count) = (task.first_column as usize, task.columns as usize);
     if count == 0 || first + count > width {
-        return Err(Status::invalid_argument(format!("columns {first}+{count} are outside the view's {width} columns")));
+        return Err(Status::invalid_argument(format!(
+            "columns {first}+{count} are outside the view's {width} columns"
+        )));
     }
     Ok((first, count))
 }
@@ -406,7 +436,13 @@ fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String, done: watch::Sender<O
 }
 
 /// Runs one task to its tile, heartbeating through `tx`.
-async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, optics: Result<Arc<Scene>, Unpacking>, tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>) -> Result<proto::Tile, Status> {
+async fn run_task(
+    s: &Arc<Shared>,
+    task: proto::RenderTask,
+    view: View,
+    optics: Result<Arc<Scene>, Unpacking>,
+    tx: &mpsc::Sender<Result<proto::RenderEvent, Status>>,
+) -> Result<proto::Tile, Status> {
     let mut paused = s.paused_tx.subscribe();
     let cancel = Arc::new(AtomicBool::new(false));
     let pixels = Arc::new(AtomicU64::new(0));
@@ -452,7 +488,9 @@ async fn run_task(s: &Arc<Shared>, task: proto::RenderTask, view: View, optics: 
     };
     let pixels_hb = pixels.clone();
     let columns =
-        watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false), s).await?.map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
+        watch_blocking(work, tx, &mut paused, &cancel, move || heartbeat(pixels_hb.load(Ordering::Relaxed), false), s)
+            .await?
+            .map_err(|e| Status::internal(format!("render task panicked: {e}")))?;
     let Some(columns) = columns else {
         return Err(Status::cancelled("cancelled"));
     };
@@ -507,11 +545,14 @@ fn same_token(a: &[u8], b: &[u8]) -> bool {
 }
 
 /// The service with its token check and message limits.
-pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedService<WorkerServer<Service>, impl tonic::service::Interceptor + Clone> {
+pub fn server(
+    shared: Arc<Shared>,
+) -> tonic::service::interceptor::InterceptedService<WorkerServer<Service>, impl tonic::service::Interceptor + Clone> {
     let token = shared.config.token.clone();
     let log = shared.config.log.clone();
     let check = move |req: Request<()>| -> Result<Request<()>, Status> {
-        let got = req.metadata().get("authorization").and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer "));
+        let got =
+            req.metadata().get("authorization").and_then(|v| v.to_str().ok()).and_then(|v| v.strip_prefix("Bearer "));
         match got {
             Some(t) if same_token(t.as_bytes(), token.as_bytes()) => Ok(req),
             Some(_) => {
@@ -522,7 +563,9 @@ pub fn server(shared: Arc<Shared>) -> tonic::service::interceptor::InterceptedSe
             None => Err(Status::unauthenticated("missing farm token (authorization: Bearer ...)")),
         }
     };
-    let svc = WorkerServer::new(Service { shared }).max_decoding_message_size(MAX_MESSAGE_BYTES).max_encoding_message_size(MAX_MESSAGE_BYTES);
+    let svc = WorkerServer::new(Service { shared })
+        .max_decoding_message_size(MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(MAX_MESSAGE_BYTES);
     tonic::service::interceptor::InterceptedService::new(svc, check)
 }
 

@@ -25,7 +25,8 @@ pub fn sun_position_deg(latitude_deg: f64, day: u32, hours: f64) -> (f64, f64) {
     let latitude = latitude_deg.to_radians();
     let sin_elevation = latitude.sin() * declination.sin() + latitude.cos() * declination.cos() * hour_angle.cos();
     let elevation_deg = sin_elevation.clamp(-1.0, 1.0).asin().to_degrees();
-    let compass = (-hour_angle.sin() * declination.cos()).atan2(declination.sin() * latitude.cos() - declination.cos() * latitude.sin() * hour_angle.cos());
+    let compass = (-hour_angle.sin() * declination.cos())
+        .atan2(declination.sin() * latitude.cos() - declination.cos() * latitude.sin() * hour_angle.cos());
     // In (-180, 180].
     let azimuth_deg = 180.0 - (180.0 - (90.0 - compass.to_degrees())).rem_euclid(360.0);
     (elevation_deg, azimuth_deg)

@@ -111,10 +111,22 @@ pub fn parse(text: &str) -> Result<Vec<FrameState>, String> {
                 (Some(parse_time(t).map_err(|e| format!("{at}: {e}"))?), None)
             }
             (None, Some(e), Some(a)) if (-90.0..=90.0).contains(&e) && a.is_finite() => (None, Some((e, a))),
-            _ => return Err(format!("{at}: give either time or both sun_elevation_deg (-90 to 90) and sun_azimuth_deg")),
+            _ => {
+                return Err(format!("{at}: give either time or both sun_elevation_deg (-90 to 90) and sun_azimuth_deg"))
+            }
         };
-        let unit = |name: &str, v: f64| if (0.0..=1.0).contains(&v) { Ok(v) } else { Err(format!("{at}: {name} must be from 0 to 1, got {v}")) };
-        let values = [unit("haziness", key.haziness)?, unit("cloudiness", key.cloudiness)?, unit("cumulus_cover", key.cumulus_cover)?];
+        let unit = |name: &str, v: f64| {
+            if (0.0..=1.0).contains(&v) {
+                Ok(v)
+            } else {
+                Err(format!("{at}: {name} must be from 0 to 1, got {v}"))
+            }
+        };
+        let values = [
+            unit("haziness", key.haziness)?,
+            unit("cloudiness", key.cloudiness)?,
+            unit("cumulus_cover", key.cumulus_cover)?,
+        ];
         if !key.wind_km_h.iter().all(|w| w.is_finite()) {
             return Err(format!("{at}: wind_km_h must be two numbers"));
         }
@@ -141,7 +153,11 @@ pub fn parse(text: &str) -> Result<Vec<FrameState>, String> {
         let after = keys.iter().position(|k| k.frame >= frame).unwrap_or(keys.len() - 1);
         let before = if keys[after].frame > frame && after > 0 { after - 1 } else { after };
         let (a, b) = (&keys[before], &keys[after]);
-        let t = if b.frame > a.frame { ((frame as f64 - a.frame as f64) / (b.frame - a.frame) as f64).clamp(0.0, 1.0) } else { 0.0 };
+        let t = if b.frame > a.frame {
+            ((frame as f64 - a.frame as f64) / (b.frame - a.frame) as f64).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         let lerp = |x: f64, y: f64| x + (y - x) * t;
         let hours = a.hours.zip(b.hours).map(|(x, y)| lerp(x, y));
         let (sun_elevation_deg, sun_azimuth_deg) = match (hours, a.sun, b.sun) {
@@ -159,7 +175,16 @@ pub fn parse(text: &str) -> Result<Vec<FrameState>, String> {
             (None, _) => [0.0, 0.0],
         };
         let [haziness, cloudiness, cumulus_cover] = std::array::from_fn(|i| lerp(a.values[i], b.values[i]));
-        states.push(FrameState { frame, hours, sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, cumulus_cover, wind_offset_km });
+        states.push(FrameState {
+            frame,
+            hours,
+            sun_elevation_deg,
+            sun_azimuth_deg,
+            haziness,
+            cloudiness,
+            cumulus_cover,
+            wind_offset_km,
+        });
     }
     Ok(states)
 }

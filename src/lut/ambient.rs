@@ -24,7 +24,7 @@
 //! the mean (the horizon is a cell edge).
 
 use super::decode::Texture;
-use super::mapping::DirectionMapping;
+use crate::directions::mapping::DirectionMapping;
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -34,11 +34,22 @@ pub const ROWS: usize = 64;
 /// The nine real spherical harmonics at unit direction `d`.
 pub fn sh9(d: DVec3) -> [f64; 9] {
     let (x, y, z) = (d.x, d.y, d.z);
-    [0.282095, 0.488603 * y, 0.488603 * z, 0.488603 * x, 1.092548 * x * y, 1.092548 * y * z, 0.315392 * (3.0 * z * z - 1.0), 1.092548 * x * z, 0.546274 * (x * x - y * y)]
+    [
+        0.282095,
+        0.488603 * y,
+        0.488603 * z,
+        0.488603 * x,
+        1.092548 * x * y,
+        1.092548 * y * z,
+        0.315392 * (3.0 * z * z - 1.0),
+        1.092548 * x * z,
+        0.546274 * (x * x - y * y),
+    ]
 }
 
 /// Â_l of each of the nine coefficients (Ramamoorthi & Hanrahan, eq. 8).
-const A_HAT: [f64; 9] = [PI, 2.0 * PI / 3.0, 2.0 * PI / 3.0, 2.0 * PI / 3.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0];
+const A_HAT: [f64; 9] =
+    [PI, 2.0 * PI / 3.0, 2.0 * PI / 3.0, 2.0 * PI / 3.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0, PI / 4.0];
 
 /// What a slice gives for ambient light, per channel of whatever the
 /// radiance was (XYZ or linear RGB).
@@ -96,7 +107,7 @@ impl Ambient {
     /// The same quantities in another space: every one of them is linear
     /// in the radiance, so a matrix carries them over.
     pub fn transformed(&self, m: &[[f64; 3]; 3]) -> Ambient {
-        let t = |v: [f64; 3]| super::decode::mat_mul(m, v);
+        let t = |v: [f64; 3]| crate::colour::apply(m, v);
         Ambient { irradiance_up: t(self.irradiance_up), mean_radiance: t(self.mean_radiance), sh9: self.sh9.map(t) }
     }
 
@@ -125,7 +136,11 @@ impl Ambient {
     /// `(1 − f) a + f b`, term by term (between two slices).
     pub fn lerp(a: &Ambient, b: &Ambient, f: f64) -> Ambient {
         let l = |x: [f64; 3], y: [f64; 3]| std::array::from_fn(|c| (1.0 - f) * x[c] + f * y[c]);
-        Ambient { irradiance_up: l(a.irradiance_up, b.irradiance_up), mean_radiance: l(a.mean_radiance, b.mean_radiance), sh9: std::array::from_fn(|k| l(a.sh9[k], b.sh9[k])) }
+        Ambient {
+            irradiance_up: l(a.irradiance_up, b.irradiance_up),
+            mean_radiance: l(a.mean_radiance, b.mean_radiance),
+            sh9: std::array::from_fn(|k| l(a.sh9[k], b.sh9[k])),
+        }
     }
 }
 

@@ -24,8 +24,8 @@
 //! [DDS_HEADER]: https://learn.microsoft.com/en-us/windows/win32/direct3ddds/dds-header
 //! [DDS_HEADER_DXT10]: https://learn.microsoft.com/en-us/windows/win32/direct3ddds/dds-header-dxt10
 
-use super::atomic::write_atomically;
 use super::texels::Texels;
+use crate::atomic::write_atomically;
 use std::path::{Path, PathBuf};
 
 /// DXGI_FORMAT_R11G11B10_FLOAT.
@@ -82,7 +82,15 @@ pub fn encode(width: u32, height: u32, layers: u32, texels: &Texels<'_>) -> Resu
     let caps = DDSCAPS_TEXTURE | if layers > 1 { DDSCAPS_COMPLEX } else { 0 };
     let mut words: Vec<u32> = vec![u32::from_le_bytes(*b"DDS ")];
     // DDS_HEADER
-    words.extend([124, DDSD_CAPS | DDSD_HEIGHT | DDSD_WIDTH | DDSD_PITCH | DDSD_PIXELFORMAT | DDSD_MIPMAPCOUNT, height, width, pitch, 0, 1]);
+    words.extend([
+        124,
+        DDSD_CAPS | DDSD_HEIGHT | DDSD_WIDTH | DDSD_PITCH | DDSD_PIXELFORMAT | DDSD_MIPMAPCOUNT,
+        height,
+        width,
+        pitch,
+        0,
+        1,
+    ]);
     words.extend([0; 11]); // dwReserved1
     words.extend([32, DDPF_FOURCC, u32::from_le_bytes(*b"DX10"), 0, 0, 0, 0, 0]); // DDS_PIXELFORMAT
     words.extend([caps, 0, 0, 0, 0]); // dwCaps, dwCaps2, dwCaps3, dwCaps4, dwReserved2
@@ -95,7 +103,7 @@ pub fn encode(width: u32, height: u32, layers: u32, texels: &Texels<'_>) -> Resu
     Ok(out)
 }
 
-/// Writes the file atomically ([`super::atomic`]); returns its size in bytes.
+/// Writes the file atomically ([`crate::atomic`]); returns its size in bytes.
 pub fn write(path: &Path, width: u32, height: u32, layers: u32, texels: &Texels<'_>) -> Result<u64, DdsError> {
     let bytes = encode(width, height, layers, texels)?;
     write_atomically(path, &bytes).map_err(|source| DdsError::Io { path: path.to_path_buf(), source })?;
@@ -118,7 +126,8 @@ mod tests {
     #[test]
     fn r11g11b10_array_reads_back() {
         let (w, h, l) = (16u32, 64u32, 64u32);
-        let rgb: Vec<[f64; 3]> = (0..w * h * l).map(|i| [f64::from(i % w), f64::from((i / w) % h), f64::from(i / (w * h))]).collect();
+        let rgb: Vec<[f64; 3]> =
+            (0..w * h * l).map(|i| [f64::from(i % w), f64::from((i / w) % h), f64::from(i / (w * h))]).collect();
         let (words, _) = r11g11b10::pack_array(&rgb).unwrap();
         let b = encode(w, h, l, &Texels::B10G11R11(&words)).unwrap();
         assert_eq!(&b[..4], b"DDS ");
@@ -132,7 +141,10 @@ mod tests {
 
         let dds = Dds::read(&b[..]).unwrap();
         assert_eq!(dds.get_dxgi_format(), Some(DxgiFormat::R11G11B10_Float));
-        assert_eq!((dds.get_width(), dds.get_height(), dds.get_num_array_layers(), dds.get_num_mipmap_levels()), (w, h, l, 1));
+        assert_eq!(
+            (dds.get_width(), dds.get_height(), dds.get_num_array_layers(), dds.get_num_mipmap_levels()),
+            (w, h, l, 1)
+        );
         assert_eq!(dds.get_pitch(), Some(w * 4));
         for layer in [0, 1, 37, 63] {
             let data = dds.get_data(layer).unwrap();
@@ -162,7 +174,10 @@ mod tests {
 
     #[test]
     fn rejects_bad_textures_and_writes_atomically() {
-        assert!(matches!(encode(2, 2, 2, &Texels::B10G11R11(&[0; 7])), Err(DdsError::TexelCount { expected: 8, got: 7, .. })));
+        assert!(matches!(
+            encode(2, 2, 2, &Texels::B10G11R11(&[0; 7])),
+            Err(DdsError::TexelCount { expected: 8, got: 7, .. })
+        ));
         assert!(matches!(encode(2, 0, 2, &Texels::B10G11R11(&[])), Err(DdsError::Empty { .. })));
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("clear.dds");

@@ -9,8 +9,8 @@
 //! it.
 
 use super::manifest::{Manifest, SkyEntry};
-use super::mapping::{self, DirectionMapping};
 use super::weather::basis_weights;
+use crate::directions::mapping::{self, DirectionMapping};
 use glam::DVec3;
 
 /// One basis sky's texture array as stored (values before the slice scale).
@@ -83,11 +83,20 @@ impl Texture {
 
 /// One basis sky's linear RGB toward `dir` (world frame, z up) with the
 /// sun at `sun_zenith_deg`, `sun_azimuth_deg`.
-pub fn sample_sky(entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, sun_azimuth_deg: f64, dir: DVec3) -> [f64; 3] {
+pub fn sample_sky(
+    entry: &SkyEntry,
+    texture: &Texture,
+    sun_zenith_deg: f64,
+    sun_azimuth_deg: f64,
+    dir: DVec3,
+) -> [f64; 3] {
     let (i0, i1, f) = slice_pair(entry, sun_zenith_deg);
     let d = rotate_to_sun_frame(dir, sun_azimuth_deg);
     // The mapping of the actual sun; each slice in its own region.
-    let m = DirectionMapping::new(sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG), entry.threshold_sun_zenith_deg);
+    let m = DirectionMapping::new(
+        sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG),
+        entry.threshold_sun_zenith_deg,
+    );
     let read = |layer: usize| {
         let slice = &entry.slices[layer];
         let (u, v) = m.uv_in_region(d, slice.sun_zenith_deg <= entry.threshold_sun_zenith_deg);
@@ -116,7 +125,11 @@ pub fn slice_pair(entry: &SkyEntry, sun_zenith_deg: f64) -> (usize, usize, f64) 
     // horizon): with the geometric blend, a sky that changes exponentially
     // with the sun's angle decodes exactly.
     let (z0, z1) = (entry.slices[i0].sun_zenith_deg, entry.slices[i1].sun_zenith_deg);
-    let f = if z1 > z0 { ((sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG) - z0) / (z1 - z0)).clamp(0.0, 1.0) } else { 0.0 };
+    let f = if z1 > z0 {
+        ((sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG) - z0) / (z1 - z0)).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     (i0, i1, f)
 }
 
@@ -142,7 +155,14 @@ impl Luts {
     /// Linear RGB (the manifest's colour space) toward `dir` (world frame,
     /// z up) for a sun at `sun_elevation_deg` (and azimuth), haziness and
     /// cloudiness in [0, 1].
-    pub fn sample(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3) -> [f64; 3] {
+    pub fn sample(
+        &self,
+        sun_elevation_deg: f64,
+        sun_azimuth_deg: f64,
+        haziness: f64,
+        cloudiness: f64,
+        dir: DVec3,
+    ) -> [f64; 3] {
         let w = basis_weights(haziness, cloudiness);
         let mut out = [0.0; 3];
         for (k, name) in super::weather::BASIS.iter().enumerate() {
@@ -152,12 +172,18 @@ impl Luts {
             // A bake without this basis sky gives it no weight; the rest is
             // renormalised below.
             let Some(i) = self.manifest.skies.iter().position(|s| s.name == *name) else { continue };
-            let rgb = sample_sky(&self.manifest.skies[i], &self.textures[i], 90.0 - sun_elevation_deg, sun_azimuth_deg, dir);
+            let rgb =
+                sample_sky(&self.manifest.skies[i], &self.textures[i], 90.0 - sun_elevation_deg, sun_azimuth_deg, dir);
             for c in 0..3 {
                 out[c] += w[k] * rgb[c];
             }
         }
-        let present: f64 = super::weather::BASIS.iter().enumerate().filter(|(_, n)| self.manifest.skies.iter().any(|s| s.name == **n)).map(|(k, _)| w[k]).sum();
+        let present: f64 = super::weather::BASIS
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| self.manifest.skies.iter().any(|s| s.name == **n))
+            .map(|(k, _)| w[k])
+            .sum();
         if present > 0.0 && present < 1.0 {
             out = out.map(|x| x / present);
         }
@@ -167,24 +193,45 @@ impl Luts {
     /// One basis sky alone, as CIE XYZ, for a sun at `sun_elevation_deg`
     /// and azimuth 0.
     pub fn sample_xyz_of(&self, entry: &SkyEntry, texture: &Texture, sun_elevation_deg: f64, dir: DVec3) -> [f64; 3] {
-        mat_mul(&self.manifest.colour.xyz_from_rgb, sample_sky(entry, texture, 90.0 - sun_elevation_deg, 0.0, dir))
+        crate::colour::apply(
+            &self.manifest.colour.xyz_from_rgb,
+            sample_sky(entry, texture, 90.0 - sun_elevation_deg, 0.0, dir),
+        )
     }
 
     /// [`Luts::sample`] as CIE XYZ (Y in cd/m²).
-    pub fn sample_xyz(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3) -> [f64; 3] {
-        mat_mul(&self.manifest.colour.xyz_from_rgb, self.sample(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, dir))
+    pub fn sample_xyz(
+        &self,
+        sun_elevation_deg: f64,
+        sun_azimuth_deg: f64,
+        haziness: f64,
+        cloudiness: f64,
+        dir: DVec3,
+    ) -> [f64; 3] {
+        crate::colour::apply(
+            &self.manifest.colour.xyz_from_rgb,
+            self.sample(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, dir),
+        )
     }
 }
 
 /// The layers of an RGBA16F 2-D array texture (KTX2, vkFormat 97) of
 /// `width` × `height` × `layers`, RGB, row-major; read with the `ktx2`
 /// crate and checked against those sizes.
-pub(crate) fn read_rgba16f_array(path: &std::path::Path, width: usize, height: usize, layers: usize) -> Result<Vec<Vec<[f32; 3]>>, LoadError> {
+pub(crate) fn read_rgba16f_array(
+    path: &std::path::Path,
+    width: usize,
+    height: usize,
+    layers: usize,
+) -> Result<Vec<Vec<[f32; 3]>>, LoadError> {
     let bytes = std::fs::read(path).map_err(|err| load_error(path, err.to_string()))?;
     let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(path, format!("not a KTX2 file: {err:?}")))?;
     let h = r.header();
     let format = h.format.map(|f| f.value()).unwrap_or(0);
-    if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT || (h.pixel_width as usize, h.pixel_height as usize) != (width, height) || h.layer_count as usize != layers {
+    if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT
+        || (h.pixel_width as usize, h.pixel_height as usize) != (width, height)
+        || h.layer_count as usize != layers
+    {
         return Err(load_error(
             path,
             format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 97, {width} x {height} x {layers} layers", h.pixel_width, h.pixel_height, h.layer_count),
@@ -192,7 +239,10 @@ pub(crate) fn read_rgba16f_array(path: &std::path::Path, width: usize, height: u
     }
     let level = r.levels().next().ok_or_else(|| load_error(path, "no level 0"))?;
     if level.data.len() != 8 * width * height * layers {
-        return Err(load_error(path, format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * width * height * layers)));
+        return Err(load_error(
+            path,
+            format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * width * height * layers),
+        ));
     }
     let texels: Vec<[f32; 3]> = level
         .data
@@ -208,12 +258,11 @@ pub(crate) fn read_rgba16f_array(path: &std::path::Path, width: usize, height: u
 
 /// The direction through each pixel centre of a `width` × `height` image
 /// through `camera`, row-major (None outside its view).
-pub fn pixel_directions(camera: &crate::render::camera::Camera, width: usize, height: usize) -> Vec<Option<DVec3>> {
-    (0..height).flat_map(|y| (0..width).map(move |x| (x, y))).map(|(x, y)| camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height)).collect()
-}
-
-pub fn mat_mul(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    [0, 1, 2].map(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
+pub fn pixel_directions(camera: &crate::directions::camera::Camera, width: usize, height: usize) -> Vec<Option<DVec3>> {
+    (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .map(|(x, y)| camera.direction(x as f64 + 0.5, y as f64 + 0.5, width, height))
+        .collect()
 }
 
 /// Why a bake cannot be loaded.
@@ -233,11 +282,18 @@ impl Luts {
     /// checked against its manifest entry.
     pub fn load(manifest_path: &std::path::Path) -> Result<Luts, LoadError> {
         let text = std::fs::read_to_string(manifest_path).map_err(|e| load_error(manifest_path, e.to_string()))?;
-        let manifest: Manifest = serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
+        let manifest: Manifest =
+            serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
         if manifest.format != super::manifest::FORMAT || manifest.version != super::manifest::VERSION {
             return Err(load_error(
                 manifest_path,
-                format!("a {} version {} manifest; this build reads {} version {}", manifest.format, manifest.version, super::manifest::FORMAT, super::manifest::VERSION),
+                format!(
+                    "a {} version {} manifest; this build reads {} version {}",
+                    manifest.format,
+                    manifest.version,
+                    super::manifest::FORMAT,
+                    super::manifest::VERSION
+                ),
             ));
         }
         let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
@@ -245,7 +301,8 @@ impl Luts {
         for e in &manifest.skies {
             let path = dir.join(&e.file);
             let bytes = std::fs::read(&path).map_err(|err| load_error(&path, err.to_string()))?;
-            let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
+            let r = ktx2::Reader::new(bytes.as_slice())
+                .map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
             let h = r.header();
             let format = h.format.map(|f| f.value()).unwrap_or(0);
             if format != super::ktx2::VK_FORMAT_B10G11R11_UFLOAT_PACK32
@@ -271,20 +328,37 @@ impl Luts {
             let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
             let texels = e.width * e.height;
             if level.data.len() != 4 * texels * e.layers {
-                return Err(load_error(&path, format!("level 0 holds {} bytes, not {}", level.data.len(), 4 * texels * e.layers)));
+                return Err(load_error(
+                    &path,
+                    format!("level 0 holds {} bytes, not {}", level.data.len(), 4 * texels * e.layers),
+                ));
             }
-            let words: Vec<[f32; 3]> = level.data.chunks_exact(4).map(|b| super::r11g11b10::unpack(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))).collect();
+            let words: Vec<[f32; 3]> = level
+                .data
+                .chunks_exact(4)
+                .map(|b| super::r11g11b10::unpack(u32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+                .collect();
             let layers = words.chunks(texels).map(<[[f32; 3]]>::to_vec).collect();
             textures.push(Texture { width: e.width, height: e.height, layers });
         }
         let mut transmittance = Vec::new();
         if let Some(t) = &manifest.transmittance {
-            transmittance = read_rgba16f_array(&dir.join(&t.file), super::transmittance::WIDTH, super::transmittance::HEIGHT, t.layers.len())?;
+            transmittance = read_rgba16f_array(
+                &dir.join(&t.file),
+                super::transmittance::WIDTH,
+                super::transmittance::HEIGHT,
+                t.layers.len(),
+            )?;
         }
         let fog = match &manifest.fog {
             Some(f) => Some(super::decode_fog::FogTextures {
                 fog: read_rgba16f_array(&dir.join(&f.file), f.width, f.height, f.layers)?,
-                attenuation: read_rgba16f_array(&dir.join(&f.attenuation.file), f.attenuation.width, f.attenuation.height, f.attenuation.layers.len())?,
+                attenuation: read_rgba16f_array(
+                    &dir.join(&f.attenuation.file),
+                    f.attenuation.width,
+                    f.attenuation.height,
+                    f.attenuation.layers.len(),
+                )?,
             }),
             None => None,
         };
@@ -332,7 +406,7 @@ impl Luts {
     /// sun's energy at any size. None if `sun_disk` and the bake has no sun.
     pub fn decode_image(
         &self,
-        camera: &crate::render::camera::Camera,
+        camera: &crate::directions::camera::Camera,
         width: usize,
         height: usize,
         sun_elevation_deg: f64,
@@ -342,13 +416,18 @@ impl Luts {
         sun_disk: bool,
     ) -> Option<Vec<[f64; 3]>> {
         let dirs = pixel_directions(camera, width, height);
-        let mut xyz: Vec<[f64; 3]> = dirs.iter().map(|d| d.map_or([0.0; 3], |d| self.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d))).collect();
+        let mut xyz: Vec<[f64; 3]> = dirs
+            .iter()
+            .map(|d| {
+                d.map_or([0.0; 3], |d| self.sample_xyz(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d))
+            })
+            .collect();
         if !sun_disk {
             return Some(xyz);
         }
         let sun = self.sun(sun_elevation_deg, haziness, cloudiness)?;
-        let to_xyz = |rgb: [f64; 3]| mat_mul(&self.manifest.colour.xyz_from_rgb, rgb);
-        let s = crate::render::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
+        let to_xyz = |rgb: [f64; 3]| crate::colour::apply(&self.manifest.colour.xyz_from_rgb, rgb);
+        let s = crate::directions::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
         let cos_radius = libm::cos(0.5 * sun.angular_diameter_deg.to_radians());
         let mut covered = false;
         for (p, d) in xyz.iter_mut().zip(&dirs) {
@@ -373,8 +452,20 @@ impl Luts {
     /// the sun's irradiance `irradiance_rgb` into it (irradiance over the
     /// pixel's solid angle, from the directions through its corners); None
     /// when the sun lies off the image rather than within that pixel.
-    pub fn sub_pixel_sun(&self, camera: &crate::render::camera::Camera, width: usize, height: usize, dirs: &[Option<DVec3>], toward: DVec3, irradiance_rgb: [f64; 3]) -> Option<(usize, [f64; 3])> {
-        let (i, _) = dirs.iter().enumerate().filter_map(|(i, d)| d.map(|d| (i, d.dot(toward)))).max_by(|a, b| a.1.total_cmp(&b.1))?;
+    pub fn sub_pixel_sun(
+        &self,
+        camera: &crate::directions::camera::Camera,
+        width: usize,
+        height: usize,
+        dirs: &[Option<DVec3>],
+        toward: DVec3,
+        irradiance_rgb: [f64; 3],
+    ) -> Option<(usize, [f64; 3])> {
+        let (i, _) = dirs
+            .iter()
+            .enumerate()
+            .filter_map(|(i, d)| d.map(|d| (i, d.dot(toward))))
+            .max_by(|a, b| a.1.total_cmp(&b.1))?;
         let (x, y) = ((i % width) as f64, (i / width) as f64);
         let corner = |dx: f64, dy: f64| camera.direction(x + dx, y + dy, width, height);
         let (a, b, c) = (corner(0.0, 0.0)?, corner(1.0, 0.0)?, corner(0.0, 1.0)?);
@@ -406,143 +497,13 @@ impl Luts {
         if present > 0.0 && present < 1.0 {
             irradiance = irradiance.map(|x| x / present);
         }
-        Some(Sun { irradiance_rgb: irradiance, disk_radiance_rgb: irradiance.map(|x| x / omega), angular_diameter_deg: diameter })
+        Some(Sun {
+            irradiance_rgb: irradiance,
+            disk_radiance_rgb: irradiance.map(|x| x / omega),
+            angular_diameter_deg: diameter,
+        })
     }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::lut::manifest::SliceEntry;
-
-    const R: f64 = 6371.0;
-    const TOP: f64 = 100.0;
-
-    /// A smooth sky of world direction and sun: brighter toward the sun
-    /// and the horizon.
-    fn sky(d: DVec3, sun: DVec3) -> [f64; 3] {
-        let c = d.dot(sun);
-        let base = 1.0 + 0.6 * c + 0.3 * c * c + 0.4 * (1.0 - d.z.abs());
-        [base, 2.0 * base, 0.5 + base]
-    }
-
-    fn entry_and_texture(w: usize, h: usize) -> (SkyEntry, Texture) {
-        let threshold = mapping::default_threshold_deg(w, h);
-        let mut slices = Vec::new();
-        let mut layers = Vec::new();
-        for i in 0..mapping::SLICES {
-            let z = mapping::slice_sun_zenith_deg(i, R, TOP);
-            let m = DirectionMapping::new(z, threshold);
-            let sun = crate::render::camera::direction_deg(z, 0.0);
-            let scale_log2 = (i % 5) as i32 - 2;
-            let layer = (0..h).flat_map(|y| (0..w).map(move |x| (x, y))).map(|(x, y)| {
-                let d = m.direction((x as f64 + 0.5) / w as f64, (y as f64 + 0.5) / h as f64);
-                sky(d, sun).map(|v| (v * (scale_log2 as f64).exp2()) as f32)
-            });
-            layers.push(layer.collect());
-            slices.push(SliceEntry { index: i, sun_zenith_deg: z, scale_log2, mean_samples: 1.0, median_rel_stderr_y: 0.0 });
-        }
-        let entry = SkyEntry {
-            name: "clear".into(),
-            file: String::new(),
-            format: String::new(),
-            vk_format: 122,
-            bytes: 0,
-            width: w,
-            height: h,
-            layers: mapping::SLICES,
-            atmosphere: String::new(),
-            atmosphere_hash: String::new(),
-            altitude_m: 0.0,
-            planet_radius_km: R,
-            top_km: TOP,
-            d_min_km: TOP,
-            d_max_km: mapping::horizontal_distance_km(R, TOP),
-            threshold_sun_zenith_deg: threshold,
-            slices,
-            texels_clamped: 0,
-            texels_denormal: 0,
-            texels_negative_rgb: 0,
-            sun: None,
-            ambient: None,
-        };
-        (entry, Texture { width: w, height: h, layers })
-    }
-
-    #[test]
-    fn texel_centres_of_a_slice_decode_to_their_texels() {
-        let (e, t) = entry_and_texture(32, 128);
-        for i in [0, 10, 30, 46, 47, 50, 63] {
-            let z = e.slices[i].sun_zenith_deg;
-            let m = DirectionMapping::new(z, e.threshold_sun_zenith_deg);
-            for (x, y) in [(0, 0), (5, 17), (31, 100), (16, 127), (20, 64)] {
-                let d = m.direction((x as f64 + 0.5) / 32.0, (y as f64 + 0.5) / 128.0);
-                // Any sun azimuth: the direction turns with the sun.
-                let az: f64 = 37.0;
-                let (s, c) = (az.to_radians().sin(), az.to_radians().cos());
-                let world = DVec3::new(c * d.x - s * d.y, s * d.x + c * d.y, d.z);
-                let got = sample_sky(&e, &t, z, az, world);
-                let want = sky(d, crate::render::camera::direction_deg(z, 0.0));
-                for c in 0..3 {
-                    assert!((got[c] / want[c] - 1.0).abs() < 1e-5, "slice {i} texel ({x}, {y}): {got:?} vs {want:?}");
-                }
-                // And its mirror image reads the same texel.
-                let mirror = sample_sky(&e, &t, z, 0.0, DVec3::new(d.x, -d.y, d.z));
-                assert!((mirror[1] / want[1] - 1.0).abs() < 1e-5);
-            }
-        }
-    }
-
-    #[test]
-    fn the_decoded_sky_has_no_step_in_time() {
-        // Along the sun's elevation in 0.05 degree steps, across every slice
-        // boundary and the switch between the two direction mappings, the
-        // decoded sky moves by at most a small fraction per step: the
-        // decoder interpolates, it never jumps. (A sun above the horizon
-        // moves the sky's pattern by up to 0.05 degrees of 11 per texel in
-        // u: well under 1 %.) Not at the zenith: below the threshold the
-        // latitude-longitude mapping's first row lies 11 degrees from the
-        // zenith (its transform has infinite slope at v = 0), so the zenith
-        // reads that row, and the step from the last sun-centred slice to
-        // the first latitude-longitude one is as large as the sky's change
-        // over those 11 degrees (`sky lut verify` measures it on real skies).
-        // Likewise, across the one slice interval where the mapping switches,
-        // the two slices sample a direction differently, and a step there is
-        // allowed up to 3 %.
-        let (e, t) = entry_and_texture(32, 128);
-        let switch = e.slices.iter().position(|s| s.sun_zenith_deg > e.threshold_sun_zenith_deg).unwrap();
-        let switch_zenith_deg = (e.slices[switch - 1].sun_zenith_deg, e.slices[switch].sun_zenith_deg);
-        for (zen, az) in [(25.0, 0.0), (45.0, 30.0), (80.0, 170.0), (89.0, 90.0), (60.0, 300.0), (88.0, 5.0)] {
-            let d = crate::render::camera::direction_deg(zen, az);
-            let mut last: Option<f64> = None;
-            for k in 0..=2000 {
-                let elev = -10.0 + k as f64 * 0.05;
-                let y = sample_sky(&e, &t, 90.0 - elev, 0.0, d)[1];
-                if let Some(l) = last {
-                    let bound = if (switch_zenith_deg.0..=switch_zenith_deg.1 + 0.05).contains(&(90.0 - elev)) { 0.03 } else { 0.01 };
-                    assert!((y / l - 1.0).abs() < bound, "direction ({zen}, {az}), sun elevation {elev}: {l} -> {y}");
-                }
-                last = Some(y);
-            }
-        }
-    }
-
-    #[test]
-    fn basis_skies_blend_by_the_weather_rule() {
-        let (mut e, t) = entry_and_texture(8, 16);
-        let mut hazed = e.clone();
-        hazed.name = "hazed".into();
-        let t2 = Texture { layers: t.layers.iter().map(|l| l.iter().map(|p| p.map(|v| 3.0 * v)).collect()).collect(), ..t.clone() };
-        e.name = "clear".into();
-        let manifest = crate::lut::manifest::tests::manifest_with(vec![e, hazed]);
-        let luts = Luts { manifest, textures: vec![t, t2], transmittance: Vec::new(), fog: None, ambient_texture: Vec::new() };
-        let d = crate::render::camera::direction_deg(50.0, 20.0);
-        let clear = luts.sample(30.0, 0.0, 0.0, 0.0, d);
-        let half = luts.sample(30.0, 0.0, 0.5, 0.0, d);
-        assert!((half[1] / clear[1] - 2.0).abs() < 1e-6, "{half:?} {clear:?}");
-        // Cloudiness moves toward basis skies this bake lacks: what is
-        // present is renormalised, so the sky neither darkens nor vanishes.
-        let cloudy = luts.sample(30.0, 0.0, 0.5, 0.1, d);
-        assert!((cloudy[1] / clear[1] - 2.0).abs() < 1e-6, "{cloudy:?} {clear:?}");
-    }
-}
+mod tests;

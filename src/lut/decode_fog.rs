@@ -43,7 +43,16 @@ impl Luts {
     /// haziness and cloudiness in [0, 1], and cloud occlusion in [0, 1] (0:
     /// the air is sunlit, 1: clouds shade it); None for a bake without fog.
     #[allow(clippy::too_many_arguments)]
-    pub fn fog(&self, sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, dir: DVec3, depth_km: f64, cloud_occlusion: f64) -> Option<FogSample> {
+    pub fn fog(
+        &self,
+        sun_elevation_deg: f64,
+        sun_azimuth_deg: f64,
+        haziness: f64,
+        cloudiness: f64,
+        dir: DVec3,
+        depth_km: f64,
+        cloud_occlusion: f64,
+    ) -> Option<FogSample> {
         self.manifest.fog.as_ref()?;
         let w = basis_weights(haziness, cloudiness);
         let (mut inscatter, mut attenuation, mut present, mut x) = ([0.0; 3], [0.0; 3], 0.0, 0.0);
@@ -51,7 +60,10 @@ impl Luts {
             if w[k] == 0.0 {
                 continue;
             }
-            let Some(f) = self.fog_of_sky(name, sun_elevation_deg, sun_azimuth_deg, dir, depth_km, cloud_occlusion) else { continue };
+            let Some(f) = self.fog_of_sky(name, sun_elevation_deg, sun_azimuth_deg, dir, depth_km, cloud_occlusion)
+            else {
+                continue;
+            };
             present += w[k];
             x = f.normalised_depth;
             for c in 0..3 {
@@ -68,7 +80,15 @@ impl Luts {
 
     /// [`Luts::fog`] of one basis sky alone (None if the bake has no fog
     /// for a sky of that name).
-    pub fn fog_of_sky(&self, name: &str, sun_elevation_deg: f64, sun_azimuth_deg: f64, dir: DVec3, depth_km: f64, cloud_occlusion: f64) -> Option<FogSample> {
+    pub fn fog_of_sky(
+        &self,
+        name: &str,
+        sun_elevation_deg: f64,
+        sun_azimuth_deg: f64,
+        dir: DVec3,
+        depth_km: f64,
+        cloud_occlusion: f64,
+    ) -> Option<FogSample> {
         let (entry, textures) = (self.manifest.fog.as_ref()?, self.fog.as_ref()?);
         let sky = self.manifest.skies.iter().find(|s| s.name == name)?;
         let f = entry.skies.iter().find(|s| s.name == name)?;
@@ -93,7 +113,8 @@ impl Luts {
         let fraction = Falloff { a: f.falloff_a, p: f.falloff_p }.fraction(x, falloff_theta(elevation_deg));
         let (ua, va) = attenuation_uv(&geometry, depth_km, elevation_deg);
         let layer = &textures.attenuation[f.attenuation_layer];
-        let attenuation_rgb = bilinear_by(|i| layer[i].map(f64::from), entry.attenuation.width, entry.attenuation.height, ua, va);
+        let attenuation_rgb =
+            bilinear_by(|i| layer[i].map(f64::from), entry.attenuation.width, entry.attenuation.height, ua, va);
         let inscatter_rgb = std::array::from_fn(|c| between_slices(a[c], b[c], t) * fraction);
         Some(FogSample { inscatter_rgb, attenuation_rgb, normalised_depth: x })
     }

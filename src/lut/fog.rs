@@ -45,10 +45,7 @@
 //! more evenly. θ is held at 0.5° and above so that the rate stays finite
 //! at the horizon itself.
 
-use super::colour::Mat3;
-use crate::render::camera::direction_deg;
-use crate::render::single::SingleScattering;
-use crate::render::Scene;
+use crate::colour::Mat3;
 use serde::{Deserialize, Serialize};
 
 /// The Fog and Shadowed Fog LUTs' texels: the talk's 32 × 32 per slice.
@@ -140,36 +137,11 @@ pub struct AttenuationTable {
 }
 
 impl AttenuationTable {
-    /// From the scene's band optics, by the single-scattering quadrature's
-    /// view transmittance under the ceiling (`SingleScattering::transmittance_to`).
-    pub fn compute(scene: &Scene, geometry: FogGeometry) -> AttenuationTable {
-        // The transmittance does not depend on the sun: any will do.
-        let ss = SingleScattering::bands(scene, glam::DVec3::Z, geometry.observer_altitude_km);
-        let mut xyz = Vec::with_capacity(ATTENUATION_SIZE * ATTENUATION_SIZE);
-        for j in 0..ATTENUATION_SIZE {
-            for i in 0..ATTENUATION_SIZE {
-                let (depth, elevation) = attenuation_texel(&geometry, i, j);
-                xyz.push(attenuated_xyz(scene, &ss, &geometry, depth, elevation));
-            }
-        }
-        AttenuationTable { geometry, xyz, unattenuated_xyz: weighted(&scene.bands.weight, &vec![1.0; scene.band_optics.len()]) }
-    }
-
-    /// The per-channel transmittance (space of `m`) of one view to one
-    /// depth, computed as the table's texels are but at any point: what
-    /// the decoded table is checked against (`bake::verify_fog`).
-    pub fn direct_rgb(scene: &Scene, geometry: &FogGeometry, depth_km: f64, elevation_deg: f64, m: &Mat3) -> [f64; 3] {
-        let ss = SingleScattering::bands(scene, glam::DVec3::Z, geometry.observer_altitude_km);
-        let xyz = attenuated_xyz(scene, &ss, geometry, depth_km, elevation_deg);
-        let top = weighted(&scene.bands.weight, &vec![1.0; scene.band_optics.len()]);
-        super::transmittance::channel_ratio(super::transmittance::mul(m, xyz), super::transmittance::mul(m, top))
-    }
-
     /// Per-channel transmittance of every texel in the space of matrix
     /// `m` (XYZ → RGB), in texel order.
     pub fn channel_texels(&self, m: &Mat3) -> Vec<[f64; 3]> {
-        let top = super::transmittance::mul(m, self.unattenuated_xyz);
-        self.xyz.iter().map(|x| super::transmittance::channel_ratio(super::transmittance::mul(m, *x), top)).collect()
+        let top = crate::colour::apply(m, self.unattenuated_xyz);
+        self.xyz.iter().map(|x| super::transmittance::channel_ratio(crate::colour::apply(m, *x), top)).collect()
     }
 
     /// The XYZ of the sun's spectrum after `depth_km` along a view of
@@ -178,25 +150,6 @@ impl AttenuationTable {
         let (u, v) = attenuation_uv(&self.geometry, depth_km, elevation_deg);
         bilinear(&self.xyz, ATTENUATION_SIZE, ATTENUATION_SIZE, u, v)
     }
-}
-
-/// The XYZ of the sun's spectrum (the bands' weights) after the low
-/// atmosphere along a view of `elevation_deg` (clamped to the upper
-/// hemisphere) to `depth_km`: a texel of the Attenuation table.
-fn attenuated_xyz(scene: &Scene, ss: &SingleScattering, geometry: &FogGeometry, depth_km: f64, elevation_deg: f64) -> [f64; 3] {
-    let t = if depth_km > 0.0 { ss.transmittance_to(direction_deg(90.0 - elevation_deg.clamp(0.0, 90.0), 0.0), depth_km, Some(geometry.ceiling_km)) } else { vec![1.0; scene.band_optics.len()] };
-    weighted(&scene.bands.weight, &t)
-}
-
-/// Σ_b w_b t_b per channel.
-fn weighted(weight: &[[f64; 3]], t: &[f64]) -> [f64; 3] {
-    let mut xyz = [0.0; 3];
-    for (w, tb) in weight.iter().zip(t) {
-        for c in 0..3 {
-            xyz[c] += w[c] * tb;
-        }
-    }
-    xyz
 }
 
 /// Bilinear lookup between texel centres of a row-major `w` × `h` table
@@ -269,7 +222,8 @@ impl Falloff {
             for _ in 0..6 {
                 for i in 0..=n {
                     for j in 0..=n {
-                        let (ln_a, p) = (lo_a + (hi_a - lo_a) * i as f64 / n as f64, lo_p + (hi_p - lo_p) * j as f64 / n as f64);
+                        let (ln_a, p) =
+                            (lo_a + (hi_a - lo_a) * i as f64 / n as f64, lo_p + (hi_p - lo_p) * j as f64 / n as f64);
                         let c = cost(sign * ln_a.exp(), p);
                         if c < best.2 {
                             best = (ln_a, p, c);
@@ -288,7 +242,11 @@ impl Falloff {
 
     /// The relative errors |fit / reference − 1| of the samples used.
     pub fn errors(&self, samples: &[FalloffSample]) -> Vec<f64> {
-        samples.iter().filter(|s| s.ratio > 0.0 && s.ratio.is_finite()).map(|s| (self.fraction(s.x, s.theta) / s.ratio - 1.0).abs()).collect()
+        samples
+            .iter()
+            .filter(|s| s.ratio > 0.0 && s.ratio.is_finite())
+            .map(|s| (self.fraction(s.x, s.theta) / s.ratio - 1.0).abs())
+            .collect()
     }
 }
 
@@ -325,14 +283,21 @@ mod tests {
             for i in 0..ATTENUATION_SIZE {
                 let (depth, elevation) = attenuation_texel(&g, i, j);
                 let (u, v) = attenuation_uv(&g, depth, elevation);
-                assert!((u - texel_position(i, ATTENUATION_SIZE)).abs() < 1e-9 && (v - texel_position(j, ATTENUATION_SIZE)).abs() < 1e-9, "({i}, {j})");
+                assert!(
+                    (u - texel_position(i, ATTENUATION_SIZE)).abs() < 1e-9
+                        && (v - texel_position(j, ATTENUATION_SIZE)).abs() < 1e-9,
+                    "({i}, {j})"
+                );
             }
         }
         for j in 0..FOG_HEIGHT {
             for i in 0..FOG_WIDTH {
                 let (e, a) = fog_texel_view(i, j, FOG_WIDTH, FOG_HEIGHT);
                 let (u, v) = fog_uv(e, a);
-                assert!((u - texel_position(i, FOG_WIDTH)).abs() < 1e-12 && (v - texel_position(j, FOG_HEIGHT)).abs() < 1e-12);
+                assert!(
+                    (u - texel_position(i, FOG_WIDTH)).abs() < 1e-12
+                        && (v - texel_position(j, FOG_HEIGHT)).abs() < 1e-12
+                );
                 for mirrored in [-a, 360.0 - a] {
                     let (um, vm) = fog_uv(e, mirrored);
                     assert!((um - u).abs() < 1e-12 && vm == v, "azimuth {mirrored}");
@@ -373,45 +338,9 @@ mod tests {
         // Convex: fog gathered mostly far away (a < 0).
         let convex = Falloff { a: -3.0, p: 0.8 };
         assert!(convex.fraction(0.5, 0.5) < 0.5);
-        let samples: Vec<FalloffSample> = samples.iter().map(|s| FalloffSample { ratio: convex.fraction(s.x, s.theta), ..*s }).collect();
+        let samples: Vec<FalloffSample> =
+            samples.iter().map(|s| FalloffSample { ratio: convex.fraction(s.x, s.theta), ..*s }).collect();
         let fit = Falloff::fit(&samples);
         assert!((fit.a / convex.a - 1.0).abs() < 1e-3 && (fit.p - convex.p).abs() < 1e-3, "{fit:?}");
-    }
-
-    /// The Attenuation table against the quadrature's transmittance of the
-    /// same rays in the hazed sky: its bilinear decode between texels is
-    /// within 1 % of a direct evaluation, plus 1e-3 where the object is all
-    /// but hidden (0.3° up at 30 km, T = 7.6e-4, decodes 8.3e-4: near the
-    /// horizon depth_max changes fast from row to row, so a fixed depth is
-    /// at different u in the two rows blended); 1 at depth 0, falling with
-    /// depth.
-    #[test]
-    fn the_attenuation_table_decodes_to_the_direct_transmittance() {
-        use crate::atmosphere::Atmosphere;
-        use crate::mie::MieCache;
-        use crate::render::{SpectralSettings, WavelengthSampling};
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("atmospheres/hazed.toml")).unwrap();
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![], xyz: true };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-        let g = geometry();
-        let table = AttenuationTable::compute(&scene, g);
-        let y = |xyz: [f64; 3]| xyz[1] / table.unattenuated_xyz[1];
-        assert!((y(table.xyz[0]) - 1.0).abs() < 1e-12);
-        let ss = SingleScattering::bands(&scene, glam::DVec3::Z, 0.0);
-        for elevation in [0.3f64, 2.0, 7.0, 30.0, 70.0] {
-            let mut last = 1.0;
-            for depth in [0.1f64, 1.0, 5.0, 30.0, 150.0] {
-                if depth > g.depth_max_km(elevation) {
-                    continue;
-                }
-                let direct = y(weighted(&scene.bands.weight, &ss.transmittance_to(direction_deg(90.0 - elevation, 0.0), depth, Some(3.0))));
-                let decoded = y(table.sample_xyz(depth, elevation));
-                eprintln!("elevation {elevation}, {depth} km: decoded {decoded:.5e}, direct {direct:.5e}");
-                assert!((decoded - direct).abs() < 0.01 * direct + 1e-3, "elevation {elevation}, {depth} km: decoded {decoded}, direct {direct}");
-                assert!(direct < last);
-                last = direct;
-            }
-        }
     }
 }

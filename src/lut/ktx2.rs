@@ -55,9 +55,9 @@
 //! [KTX2]: https://registry.khronos.org/KTX/specs/2.0/ktxspec.v2.html
 //! [KDFS]: https://registry.khronos.org/DataFormat/specs/1.3/dataformat.1.3.html
 
-use super::atomic::write_atomically;
-use super::colour::ColourSpace;
 use super::texels::Texels;
+use crate::atomic::write_atomically;
+use crate::colour::ColourSpace;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -202,7 +202,11 @@ pub fn encode(tex: &ArrayTexture<'_>) -> Result<Vec<u8>, Ktx2Error> {
     serde_json::from_str::<serde::de::IgnoredAny>(tex.sky_json).map_err(Ktx2Error::NotJson)?;
 
     let dfd = data_format_descriptor(&tex.texels, tex.colour_space);
-    let entries = BTreeMap::from([("KTXorientation", nul_terminated("rd")), ("KTXwriter", nul_terminated(&writer_name())), (SKY_KEY, nul_terminated(tex.sky_json))]);
+    let entries = BTreeMap::from([
+        ("KTXorientation", nul_terminated("rd")),
+        ("KTXwriter", nul_terminated(&writer_name())),
+        (SKY_KEY, nul_terminated(tex.sky_json)),
+    ]);
     let kvd = key_value_data(&entries);
 
     let dfd_offset = HEADER_BYTES + LEVEL_INDEX_BYTES;
@@ -268,7 +272,8 @@ mod tests {
         for layer in 0..l {
             for y in 0..h {
                 for x in 0..w {
-                    t[texel_index(w, h, layer, x, y)] = r11g11b10::pack([f64::from(x), f64::from(y), f64::from(layer)]).unwrap();
+                    t[texel_index(w, h, layer, x, y)] =
+                        r11g11b10::pack([f64::from(x), f64::from(y), f64::from(layer)]).unwrap();
                 }
             }
         }
@@ -278,7 +283,14 @@ mod tests {
     const JSON: &str = r#"{"basis": "clear", "slices": 64, "units": "kcd/m^2"}"#;
 
     fn lut(t: &[u32]) -> ArrayTexture<'_> {
-        ArrayTexture { width: 32, height: 128, layers: 64, colour_space: ColourSpace::Rec709, texels: Texels::B10G11R11(t), sky_json: JSON }
+        ArrayTexture {
+            width: 32,
+            height: 128,
+            layers: 64,
+            colour_space: ColourSpace::Rec709,
+            texels: Texels::B10G11R11(t),
+            sky_json: JSON,
+        }
     }
 
     /// Our own reading of every field the KTX2 rules fix, independent of
@@ -291,7 +303,8 @@ mod tests {
         assert_eq!(b[..12], IDENTIFIER);
         let header: Vec<u32> = (0..9).map(|i| u32_at(&b, 12 + 4 * i)).collect();
         assert_eq!(header, [122, 4, 32, 128, 0, 64, 1, 1, 0]);
-        let (dfd_off, dfd_len, kvd_off, kvd_len) = (u32_at(&b, 48) as usize, u32_at(&b, 52) as usize, u32_at(&b, 56) as usize, u32_at(&b, 60) as usize);
+        let (dfd_off, dfd_len, kvd_off, kvd_len) =
+            (u32_at(&b, 48) as usize, u32_at(&b, 52) as usize, u32_at(&b, 56) as usize, u32_at(&b, 60) as usize);
         assert_eq!((u64_at(&b, 64), u64_at(&b, 72)), (0, 0), "no supercompression global data");
         assert_eq!(dfd_off, 104);
         assert_eq!(dfd_len, 76);
@@ -355,13 +368,17 @@ mod tests {
         let r = ::ktx2::Reader::new(&b[..]).unwrap();
         let h = r.header();
         assert_eq!(h.format, Some(::ktx2::Format::B10G11R11_UFLOAT_PACK32));
-        assert_eq!((h.type_size, h.pixel_width, h.pixel_height, h.pixel_depth, h.layer_count, h.face_count, h.level_count), (4, 32, 128, 0, 64, 1, 1));
+        assert_eq!(
+            (h.type_size, h.pixel_width, h.pixel_height, h.pixel_depth, h.layer_count, h.face_count, h.level_count),
+            (4, 32, 128, 0, 64, 1, 1)
+        );
         assert_eq!(h.supercompression_scheme, None);
         let levels: Vec<_> = r.levels().collect();
         assert_eq!(levels.len(), 1);
         assert_eq!(levels[0].data.len(), t.len() * 4);
         assert_eq!(levels[0].uncompressed_byte_length, (t.len() * 4) as u64);
-        let back: Vec<u32> = levels[0].data.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
+        let back: Vec<u32> =
+            levels[0].data.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
         assert_eq!(back, t);
         assert_eq!(r.writer(), Some(format!("sky {}\0", env!("CARGO_PKG_VERSION")).as_str()));
         let keys: Vec<_> = r.key_value_data().map(|(k, _)| k).collect();
@@ -373,14 +390,24 @@ mod tests {
         let dfd = r.basic_dfd().unwrap();
         assert_eq!(dfd.sample_information.len(), 3);
 
-        for (texels, format) in [(Texels::B10G11R11(&[]), ::ktx2::Format::B10G11R11_UFLOAT_PACK32), (Texels::Rgba16f(&[]), ::ktx2::Format::R16G16B16A16_SFLOAT)] {
+        for (texels, format) in [
+            (Texels::B10G11R11(&[]), ::ktx2::Format::B10G11R11_UFLOAT_PACK32),
+            (Texels::Rgba16f(&[]), ::ktx2::Format::R16G16B16A16_SFLOAT),
+        ] {
             for (space, primaries) in [
                 (ColourSpace::Rec709, ::ktx2::ColorPrimaries::BT709),
                 (ColourSpace::Rec2020, ::ktx2::ColorPrimaries::BT2020),
                 (ColourSpace::AcesCg, ::ktx2::ColorPrimaries::ACESCC),
                 (ColourSpace::Xyz, ::ktx2::ColorPrimaries::CIEXYZ),
             ] {
-                let (basic, crate_type_size) = ::ktx2::dfd::Basic::from_format_with(format, false, Some(::ktx2::TransferFunction::Linear), Some(primaries), None).unwrap();
+                let (basic, crate_type_size) = ::ktx2::dfd::Basic::from_format_with(
+                    format,
+                    false,
+                    Some(::ktx2::TransferFunction::Linear),
+                    Some(primaries),
+                    None,
+                )
+                .unwrap();
                 assert_eq!(crate_type_size, type_size(&texels), "{format:?}");
                 let block = ::ktx2::dfd::Block::Basic(basic).to_vec();
                 let ours = data_format_descriptor(&texels, space);
@@ -394,7 +421,14 @@ mod tests {
     fn rgba16f_file() {
         let rgb: Vec<[f64; 3]> = (0..4 * 2 * 3).map(|i| [i as f64, 0.5, 1e5]).collect();
         let (h, _) = rgba16f::pack_array(&rgb).unwrap();
-        let tex = ArrayTexture { width: 4, height: 2, layers: 3, colour_space: ColourSpace::AcesCg, texels: Texels::Rgba16f(&h), sky_json: "{}" };
+        let tex = ArrayTexture {
+            width: 4,
+            height: 2,
+            layers: 3,
+            colour_space: ColourSpace::AcesCg,
+            texels: Texels::Rgba16f(&h),
+            sky_json: "{}",
+        };
         let b = encode(&tex).unwrap();
         let r = ::ktx2::Reader::new(&b[..]).unwrap();
         let hd = r.header();
@@ -403,20 +437,34 @@ mod tests {
         let data = r.levels().next().unwrap().data;
         assert_eq!(data.len(), 24 * 8);
         let t = texel_index(4, 2, 2, 3, 1);
-        let texel: [u16; 4] = std::array::from_fn(|c| u16::from_le_bytes([data[8 * t + 2 * c], data[8 * t + 2 * c + 1]]));
+        let texel: [u16; 4] =
+            std::array::from_fn(|c| u16::from_le_bytes([data[8 * t + 2 * c], data[8 * t + 2 * c + 1]]));
         assert_eq!(rgba16f::unpack(texel), [t as f32, 0.5, 65504.0, 1.0]);
     }
 
     #[test]
     fn rejects_bad_textures() {
         let t = words(2, 2, 2);
-        let base = ArrayTexture { width: 2, height: 2, layers: 2, colour_space: ColourSpace::Rec709, texels: Texels::B10G11R11(&t), sky_json: "{}" };
+        let base = ArrayTexture {
+            width: 2,
+            height: 2,
+            layers: 2,
+            colour_space: ColourSpace::Rec709,
+            texels: Texels::B10G11R11(&t),
+            sky_json: "{}",
+        };
         assert!(encode(&base).is_ok());
-        assert!(matches!(encode(&ArrayTexture { layers: 3, ..base }), Err(Ktx2Error::TexelCount { expected: 12, got: 8, .. })));
+        assert!(matches!(
+            encode(&ArrayTexture { layers: 3, ..base }),
+            Err(Ktx2Error::TexelCount { expected: 12, got: 8, .. })
+        ));
         assert!(matches!(encode(&ArrayTexture { width: 0, ..base }), Err(Ktx2Error::Empty { .. })));
         assert!(matches!(encode(&ArrayTexture { sky_json: "{not json", ..base }), Err(Ktx2Error::NotJson(_))));
         assert!(encode(&ArrayTexture { sky_json: "\"a\\u0000b\"", ..base }).is_ok(), "an escaped NUL is fine");
-        assert!(matches!(encode(&ArrayTexture { sky_json: "\"a\0b\"", ..base }), Err(Ktx2Error::NotJson(_))), "a raw NUL is not JSON");
+        assert!(
+            matches!(encode(&ArrayTexture { sky_json: "\"a\0b\"", ..base }), Err(Ktx2Error::NotJson(_))),
+            "a raw NUL is not JSON"
+        );
     }
 
     #[test]
@@ -424,7 +472,14 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("clear.ktx2");
         let t = words(2, 2, 2);
-        let tex = ArrayTexture { width: 2, height: 2, layers: 2, colour_space: ColourSpace::Rec709, texels: Texels::B10G11R11(&t), sky_json: "{}" };
+        let tex = ArrayTexture {
+            width: 2,
+            height: 2,
+            layers: 2,
+            colour_space: ColourSpace::Rec709,
+            texels: Texels::B10G11R11(&t),
+            sky_json: "{}",
+        };
         std::fs::write(&path, b"old").unwrap();
         let n = write(&path, &tex).unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), encode(&tex).unwrap());

@@ -5,8 +5,8 @@
 //! through the decoded fog at its depth (`decode_fog`): object ×
 //! attenuation + fog. Only for pictures: nothing is measured on it.
 
-use super::decode::{mat_mul, Luts};
-use crate::render::camera::Camera;
+use super::decode::Luts;
+use crate::directions::camera::Camera;
 use glam::DVec3;
 use std::f64::consts::PI;
 
@@ -35,7 +35,10 @@ pub fn top_elevation_deg(r: &Ridge, azimuth_deg: f64) -> f64 {
 
 /// The depth of the nearest ridge a view of (elevation, azimuth) meets, km.
 pub fn ridge_depth_km(elevation_deg: f64, azimuth_deg: f64) -> Option<f64> {
-    RIDGES.iter().find(|r| elevation_deg <= top_elevation_deg(r, azimuth_deg)).map(|r| r.distance_km / elevation_deg.to_radians().cos().max(1e-3))
+    RIDGES
+        .iter()
+        .find(|r| elevation_deg <= top_elevation_deg(r, azimuth_deg))
+        .map(|r| r.distance_km / elevation_deg.to_radians().cos().max(1e-3))
 }
 
 /// The normal of the ridge a view `d` meets: the slope facing the camera,
@@ -69,12 +72,21 @@ pub fn decode_landscape(
 /// [`decode_landscape`] toward each of `dirs` (world frame, z up; None:
 /// black).
 #[allow(clippy::too_many_arguments)]
-pub fn landscape_toward(luts: &Luts, dirs: &[Option<DVec3>], sun_elevation_deg: f64, sun_azimuth_deg: f64, haziness: f64, cloudiness: f64, cloud_occlusion: f64, albedo: f64) -> Option<Vec<[f64; 3]>> {
+pub fn landscape_toward(
+    luts: &Luts,
+    dirs: &[Option<DVec3>],
+    sun_elevation_deg: f64,
+    sun_azimuth_deg: f64,
+    haziness: f64,
+    cloudiness: f64,
+    cloud_occlusion: f64,
+    albedo: f64,
+) -> Option<Vec<[f64; 3]>> {
     luts.manifest.fog.as_ref()?;
     let sun = luts.sun(sun_elevation_deg, haziness, cloudiness)?;
     let ambient = luts.ambient(sun_elevation_deg, haziness, cloudiness)?;
-    let to_sun = crate::render::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
-    let to_xyz = |rgb: [f64; 3]| mat_mul(&luts.manifest.colour.xyz_from_rgb, rgb);
+    let to_sun = crate::directions::camera::direction_deg(90.0 - sun_elevation_deg, sun_azimuth_deg);
+    let to_xyz = |rgb: [f64; 3]| crate::colour::apply(&luts.manifest.colour.xyz_from_rgb, rgb);
     let mut out = Vec::with_capacity(dirs.len());
     for &d in dirs {
         let Some(d) = d else {
@@ -88,7 +100,8 @@ pub fn landscape_toward(luts: &Luts, dirs: &[Option<DVec3>], sun_elevation_deg: 
             continue;
         };
         let cos_sun = slope_normal(d).dot(to_sun).max(0.0);
-        let object: [f64; 3] = std::array::from_fn(|c| albedo / PI * (sun.irradiance_rgb[c] * cos_sun + ambient.irradiance_up[c]));
+        let object: [f64; 3] =
+            std::array::from_fn(|c| albedo / PI * (sun.irradiance_rgb[c] * cos_sun + ambient.irradiance_up[c]));
         let fog = luts.fog(sun_elevation_deg, sun_azimuth_deg, haziness, cloudiness, d, depth, cloud_occlusion)?;
         out.push(to_xyz(std::array::from_fn(|c| object[c] * fog.attenuation_rgb[c] + fog.inscatter_rgb[c])));
     }

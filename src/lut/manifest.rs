@@ -277,7 +277,7 @@ pub struct SliceEntry {
 
 /// The manifest's fixed descriptions, shared by the writer and the docs.
 pub fn time_mapping() -> TimeMapping {
-    use super::mapping::*;
+    use crate::directions::mapping::*;
     TimeMapping {
         slices: SLICES,
         upper_slices: UPPER_SLICES,
@@ -290,7 +290,7 @@ pub fn time_mapping() -> TimeMapping {
 }
 
 pub fn direction_mapping() -> DirectionMappingInfo {
-    use super::mapping::*;
+    use crate::directions::mapping::*;
     DirectionMappingInfo {
         texels: "texel (x, y) of a layer covers the cell centred on (u, v) = ((x + 0.5) / width, (y + 0.5) / height); row y = 0 is first in memory (KTXorientation \"rd\")".into(),
         frame: "z is the zenith; the sun lies in the x-z plane at azimuth 0; azimuth runs from +x toward +y".into(),

@@ -85,7 +85,11 @@ pub fn encode(v: f64, mantissa_bits: u32) -> Option<(u32, Rounding)> {
     // e = floor(log2 v) from the f64 exponent field. Every f64 below 2^-14
     // (f64 denormals included) takes the target's denormal quantum, so its
     // exact exponent is not needed.
-    let e = if v >= f64::from(MIN_NORMAL_EXP).exp2() { ((v.to_bits() >> 52) & 0x7ff) as i32 - 1023 } else { MIN_NORMAL_EXP };
+    let e = if v >= f64::from(MIN_NORMAL_EXP).exp2() {
+        ((v.to_bits() >> 52) & 0x7ff) as i32 - 1023
+    } else {
+        MIN_NORMAL_EXP
+    };
     // The spacing of representable values in v's binade (in the denormal
     // range, the fixed spacing 2^(-14 - m)). v / q is exact: q is a power
     // of two and the quotient stays far from the f64 limits.

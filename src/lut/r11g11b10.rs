@@ -102,7 +102,8 @@ pub fn pack_classified(rgb: [f64; 3]) -> Result<(u32, [Rounding; 3]), PackError>
     let mut kinds = [Rounding::Zero; 3];
     for channel in Channel::ALL {
         let value = rgb[channel.index()];
-        let (code, kind) = minifloat::encode(value, channel.mantissa_bits()).ok_or(PackError::NotFinite { channel, value })?;
+        let (code, kind) =
+            minifloat::encode(value, channel.mantissa_bits()).ok_or(PackError::NotFinite { channel, value })?;
         word |= code << channel.bit_offset();
         kinds[channel.index()] = kind;
     }
@@ -347,7 +348,18 @@ mod tests {
         let (words, stats) = pack_array(&texels).unwrap();
         assert_eq!(words.len(), texels.len());
         assert_eq!(words[0], 0x781E03C0);
-        assert_eq!(stats, PackStats { texels: 6, clamped_texels: 2, denormal_texels: 3, underflow_texels: 1, negative_texels: 1, clamped_per_channel: [2, 1, 1], denormal_per_channel: [1, 1, 1] });
+        assert_eq!(
+            stats,
+            PackStats {
+                texels: 6,
+                clamped_texels: 2,
+                denormal_texels: 3,
+                underflow_texels: 1,
+                negative_texels: 1,
+                clamped_per_channel: [2, 1, 1],
+                denormal_per_channel: [1, 1, 1]
+            }
+        );
         let mut twice = stats;
         twice.merge(&stats);
         assert_eq!(twice.texels, 12);

@@ -94,7 +94,10 @@ mod tests {
     #[test]
     fn signed_halves() {
         assert_eq!(pack_signed([-1.0, 0.5, -0.0]).unwrap(), [0xBC00, 0x3800, 0, ONE]);
-        assert_eq!(unpack(pack_signed([-0.1, -1e6, 3.0]).unwrap()), [-unpack(pack([0.1, 0.0, 0.0]).unwrap())[0], -65504.0, 3.0, 1.0]);
+        assert_eq!(
+            unpack(pack_signed([-0.1, -1e6, 3.0]).unwrap()),
+            [-unpack(pack([0.1, 0.0, 0.0]).unwrap())[0], -65504.0, 3.0, 1.0]
+        );
         assert!(pack_signed([f64::NAN, 0.0, 0.0]).is_err());
     }
 

@@ -26,8 +26,7 @@
 //! times T_c exactly. T_b = exp(−Σ_i e_i,b C_i(z, μ)) from the column table
 //! (exact optical depth up to the table's interpolation).
 
-use super::colour::Mat3;
-use crate::render::Scene;
+use crate::colour::Mat3;
 use serde::{Deserialize, Serialize};
 
 /// Texels along μ (x) and r (y): Bruneton's sizes.
@@ -98,26 +97,11 @@ pub struct TransmittanceTable {
 }
 
 impl TransmittanceTable {
-    /// Computes the table from a scene's band optics and column table.
-    pub fn compute(scene: &Scene) -> TransmittanceTable {
-        let m = &scene.medium;
-        let mapping = TransmittanceMapping::new(m.radius_km, m.top_km);
-        let mut xyz = Vec::with_capacity(WIDTH * HEIGHT);
-        for j in 0..HEIGHT {
-            for i in 0..WIDTH {
-                let (r, mu) = mapping.r_mu(i as f64 / (WIDTH - 1) as f64, j as f64 / (HEIGHT - 1) as f64);
-                xyz.push(sun_xyz_at(scene, r - m.radius_km, mu));
-            }
-        }
-        let top_xyz = scene.bands.weight.iter().fold([0.0; 3], |a, w| [a[0] + w[0], a[1] + w[1], a[2] + w[2]]);
-        TransmittanceTable { mapping, xyz, top_xyz }
-    }
-
     /// Per-channel transmittance of every texel in the space of matrix
     /// `m` (XYZ → RGB), in texel order.
     pub fn channel_texels(&self, m: &Mat3) -> Vec<[f64; 3]> {
-        let top = mul(m, self.top_xyz);
-        self.xyz.iter().map(|x| channel_ratio(mul(m, *x), top)).collect()
+        let top = crate::colour::apply(m, self.top_xyz);
+        self.xyz.iter().map(|x| channel_ratio(crate::colour::apply(m, *x), top)).collect()
     }
 
     /// XYZ of the sun's irradiance at altitude `z_km` along cosine `mu`,
@@ -127,27 +111,9 @@ impl TransmittanceTable {
     }
 }
 
-/// XYZ of the sun's irradiance reaching altitude `z_km` along cosine `mu`
-/// (to space), directly from the scene's column table: Σ_b W_b T_b.
-pub fn sun_xyz_at(scene: &Scene, z_km: f64, mu: f64) -> [f64; 3] {
-    let mut xyz = [0.0; 3];
-    for (w, o) in scene.bands.weight.iter().zip(&scene.band_optics) {
-        let tau = scene.columns.optical_depth(z_km.max(0.0), mu, &o.extinction);
-        let t = if tau.is_finite() { libm::exp(-tau) } else { 0.0 };
-        for c in 0..3 {
-            xyz[c] += w[c] * t;
-        }
-    }
-    xyz
-}
-
 /// `value / top` per channel (0 where the top's channel is not positive).
 pub fn channel_ratio(value: [f64; 3], top: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|c| if top[c] > 0.0 { value[c] / top[c] } else { 0.0 })
-}
-
-pub(crate) fn mul(m: &Mat3, v: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|r| m[r][0] * v[0] + m[r][1] * v[1] + m[r][2] * v[2])
 }
 
 /// Bilinear lookup of a WIDTH × HEIGHT table (`texel(i)` the value of
@@ -170,9 +136,6 @@ pub fn sample(mapping: &TransmittanceMapping, texel: impl Fn(usize) -> [f64; 3],
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::atmosphere::Atmosphere;
-    use crate::mie::MieCache;
-    use crate::render::{SpectralSettings, WavelengthSampling};
 
     #[test]
     fn the_mapping_round_trips_and_spans_zenith_to_grazing() {
@@ -185,7 +148,10 @@ mod tests {
             let mu = lo + (1.0 - lo) * ((k * 37 % 101) as f64 / 100.0);
             let (x_mu, x_r) = m.unit(r, mu);
             let (r2, mu2) = m.r_mu(x_mu, x_r);
-            assert!((r2 - r).abs() < 1e-9 && (mu2 - mu).abs() < 1e-9, "({r}, {mu}) -> ({x_mu}, {x_r}) -> ({r2}, {mu2})");
+            assert!(
+                (r2 - r).abs() < 1e-9 && (mu2 - mu).abs() < 1e-9,
+                "({r}, {mu}) -> ({x_mu}, {x_r}) -> ({r2}, {mu2})"
+            );
         }
         // Straight up at x_μ = 0, the grazing ray at x_μ = 1, the ground and the top at x_r = 0, 1.
         let (r, mu) = m.r_mu(0.0, 0.4);
@@ -193,76 +159,5 @@ mod tests {
         let (r, mu) = m.r_mu(1.0, 0.4);
         assert!((mu - m.mu_horizon(r)).abs() < 1e-12);
         assert!((m.r_mu(0.3, 0.0).0 - 6371.0).abs() < 1e-9 && (m.r_mu(0.3, 1.0).0 - 6471.0).abs() < 1e-9);
-    }
-
-    /// The table's bilinear decode against the column table's own
-    /// transmittance at points between texel centres, the clear sky from 0
-    /// to 12 km: within 0.2 % of the sun's Y wherever the sun is more than
-    /// half a degree above the grazing ray (measured: 0.11 %, at the top of
-    /// the aerosols' boundary layer at 2 km, whose kink falls between rows
-    /// about 0.45 km apart there; 0.05 % elsewhere), and the sun's colour
-    /// goes red toward the horizon.
-    #[test]
-    fn the_table_decodes_the_column_tables_transmittance() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("atmospheres/clear.toml")).unwrap();
-        let spectral = SpectralSettings { band_nm: 20.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: Vec::new(), xyz: true };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-        let table = TransmittanceTable::compute(&scene);
-        let top_y = table.top_xyz[1];
-        let mut worst: f64 = 0.0;
-        for k in 0..400 {
-            let z = 12.0 * ((k * 7919) % 400) as f64 / 400.0;
-            let r = table.mapping.bottom_radius_km + z;
-            let lo = table.mapping.mu_horizon(r).acos().to_degrees() - 0.5;
-            let zenith_deg = lo * ((k * 104729) % 1000) as f64 / 1000.0;
-            let mu = zenith_deg.to_radians().cos();
-            let exact = sun_xyz_at(&scene, z, mu)[1];
-            let decoded = table.sample_xyz(z, mu)[1];
-            worst = worst.max((decoded - exact).abs() / top_y);
-        }
-        assert!(worst < 2e-3, "worst error {worst:e} of the sun's Y");
-        let rgb = table.channel_texels(&crate::lut::colour::ColourSpace::Rec709.xyz_to_rgb());
-        let noon = rgb[0];
-        let low = rgb[WIDTH - 8];
-        assert!(noon.iter().all(|&t| t > 0.5 && t < 1.0), "{noon:?}");
-        assert!(low[0] > low[1] && low[1] > low[2], "{low:?}");
-        // Below the grazing ray: nothing.
-        assert_eq!(table.sample_xyz(0.0, -0.05), [0.0; 3]);
-    }
-
-    /// The column table (what the LUT is made from) against an independent
-    /// quadrature of the optical depth along the curved ray for the
-    /// exponential Rayleigh slab of the DISORT tests, made spherical:
-    /// σ(z) = σ₀ e^(−z/8 km) integrated by the midpoint rule on 20 000
-    /// steps, at sun zeniths up to 89°, from 0 and 5 km.
-    #[test]
-    fn the_column_tables_transmittance_matches_quadrature() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let mut atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh.toml")).unwrap();
-        atm.planet.geometry = crate::atmosphere::Geometry::Spherical;
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: Vec::new(), xyz: true };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-        let (rad, top) = (scene.medium.radius_km, scene.medium.top_km);
-        let o = &scene.band_optics[0];
-        let sigma0: f64 = o.extinction[0] * scene.medium.density(0, 0.0);
-        for z0 in [0.0, 5.0] {
-            for deg in [0.0, 45.0, 75.0, 85.0, 89.0] {
-                let mu = f64::to_radians(deg).cos();
-                let r0 = rad + z0;
-                let len = distance_to_top_km(r0, mu, rad + top);
-                let n = 20_000;
-                let ds = len / n as f64;
-                let tau: f64 = (0..n)
-                    .map(|k| {
-                        let s = (k as f64 + 0.5) * ds;
-                        let r = (r0 * r0 + s * s + 2.0 * r0 * s * mu).sqrt();
-                        sigma0 * (-(r - rad) / 8.0).exp() * ds
-                    })
-                    .sum();
-                let ours = scene.columns.optical_depth(z0, mu, &o.extinction);
-                assert!((ours / tau - 1.0).abs() < 2e-3, "{z0} km, {deg} deg: column {ours}, quadrature {tau}");
-            }
-        }
     }
 }

@@ -43,7 +43,9 @@ impl MieCache {
     fn key(m: C64, mode: &LogNormal, wavelength_nm: f64, angles_deg: &[f64]) -> String {
         let mut h = blake3::Hasher::new();
         h.update(ALGORITHM_VERSION.as_bytes());
-        for v in [m.re, m.im.abs(), mode.median_radius_um, mode.sigma, mode.min_radius_um, mode.max_radius_um, wavelength_nm] {
+        for v in
+            [m.re, m.im.abs(), mode.median_radius_um, mode.sigma, mode.min_radius_um, mode.max_radius_um, wavelength_nm]
+        {
             h.update(&v.to_le_bytes());
         }
         h.update(&(angles_deg.len() as u64).to_le_bytes());
@@ -75,11 +77,11 @@ impl MieCache {
 }
 
 /// Writes `bytes` to `path` through a temporary file in the same directory
-/// and a rename ([`crate::lut::atomic::write_atomically`]), creating the
+/// and a rename ([`crate::atomic::write_atomically`]), creating the
 /// directory if needed.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     std::fs::create_dir_all(path.parent().unwrap_or(Path::new(".")))?;
-    crate::lut::atomic::write_atomically(path, bytes)
+    crate::atomic::write_atomically(path, bytes)
 }
 
 #[cfg(test)]

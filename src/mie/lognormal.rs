@@ -180,7 +180,15 @@ pub fn bulk_optics(m: C64, mode: &LogNormal, wavelength_nm: f64, angles_deg: &[f
         }
     }
     let phase_sr_inv = intensity.iter().map(|i| if c_sca > 0.0 { i / (k * k * c_sca) } else { 0.0 }).collect();
-    BulkOptics { wavelength_nm, c_ext_um2: c_ext, c_sca_um2: c_sca, g: if c_sca > 0.0 { g_c_sca / c_sca } else { 0.0 }, angles_deg: angles_deg.to_vec(), phase_sr_inv, radius_nodes: nodes.len() }
+    BulkOptics {
+        wavelength_nm,
+        c_ext_um2: c_ext,
+        c_sca_um2: c_sca,
+        g: if c_sca > 0.0 { g_c_sca / c_sca } else { 0.0 },
+        angles_deg: angles_deg.to_vec(),
+        phase_sr_inv,
+        radius_nodes: nodes.len(),
+    }
 }
 
 /// Combines modes with number fractions `weights` (normalised here) into

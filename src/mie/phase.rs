@@ -135,14 +135,22 @@ pub fn henyey_greenstein(cos_theta: f64, g: f64) -> f64 {
 /// Cornette–Shanks phase function (sr⁻¹), Cornette and Shanks (1992), as on
 /// the talk's slide: 3(1 − g²) / (2(2 + g²)) (1 + cos²θ) / (4π (1 + g² − 2g cos θ)^{3/2}).
 pub fn cornette_shanks(cos_theta: f64, g: f64) -> f64 {
-    3.0 * (1.0 - g * g) / (2.0 * (2.0 + g * g)) * (1.0 + cos_theta * cos_theta) / (4.0 * PI * pow_three_halves(1.0 + g * g - 2.0 * g * cos_theta))
+    3.0 * (1.0 - g * g) / (2.0 * (2.0 + g * g)) * (1.0 + cos_theta * cos_theta)
+        / (4.0 * PI * pow_three_halves(1.0 + g * g - 2.0 * g * cos_theta))
 }
 
 /// The Henyey–Greenstein g that best fits a tabulated phase function in the
 /// least-squares sense on log p (the comparison on the talk's log-scale
 /// plots), by golden-section search over g ∈ [−0.5, 0.995].
 pub fn fit_henyey_greenstein(angles_deg: &[f64], p_sr_inv: &[f64]) -> f64 {
-    let cost = |g: f64| -> f64 { angles_deg.iter().zip(p_sr_inv).filter(|(_, &p)| p > 0.0).map(|(a, p)| (p.ln() - henyey_greenstein(a.to_radians().cos(), g).ln()).powi(2)).sum() };
+    let cost = |g: f64| -> f64 {
+        angles_deg
+            .iter()
+            .zip(p_sr_inv)
+            .filter(|(_, &p)| p > 0.0)
+            .map(|(a, p)| (p.ln() - henyey_greenstein(a.to_radians().cos(), g).ln()).powi(2))
+            .sum()
+    };
     let (mut a, mut b) = (-0.5f64, 0.995f64);
     let r = (5f64.sqrt() - 1.0) / 2.0;
     let mut c = b - r * (b - a);

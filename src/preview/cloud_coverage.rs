@@ -46,7 +46,12 @@ pub fn default_coverage() -> Vec<[u8; 4]> {
 pub fn coverage_from_png(path: &Path) -> Result<Vec<[u8; 4]>, PreviewError> {
     let image = image::open(path).map_err(|e| PreviewError::Bake(format!("{}: {e}", path.display())))?.to_rgba8();
     if image.width() != COVERAGE_WIDTH || image.height() != COVERAGE_HEIGHT {
-        return Err(PreviewError::Bake(format!("{}: a coverage texture is {COVERAGE_WIDTH} x {COVERAGE_HEIGHT}, this is {} x {}", path.display(), image.width(), image.height())));
+        return Err(PreviewError::Bake(format!(
+            "{}: a coverage texture is {COVERAGE_WIDTH} x {COVERAGE_HEIGHT}, this is {} x {}",
+            path.display(),
+            image.width(),
+            image.height()
+        )));
     }
     let mut out = Vec::with_capacity((COVERAGE_WIDTH * COVERAGE_HEIGHT) as usize);
     for j in (0..COVERAGE_HEIGHT).rev() {

@@ -43,7 +43,9 @@ impl CloudNoise {
                     sample_count: 1,
                     dimension: wgpu::TextureDimension::D3,
                     format: wgpu::TextureFormat::Rgba16Float,
-                    usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC,
+                    usage: wgpu::TextureUsages::STORAGE_BINDING
+                        | wgpu::TextureUsages::TEXTURE_BINDING
+                        | wgpu::TextureUsages::COPY_SRC,
                     view_formats: &[],
                 })
             })
@@ -58,12 +60,18 @@ impl CloudNoise {
                 usage: wgpu::BufferUsages::UNIFORM,
             })
         };
-        let storage =
-            |label, n: u32| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(&vec![0.0; n as usize]), usage: wgpu::BufferUsages::STORAGE });
+        let storage = |label, n: u32| {
+            gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: &f32_bytes(&vec![0.0; n as usize]),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
         let (low_params, high_params) = (uniform(params(LOW_SIZE)), uniform(params(HIGH_SIZE)));
         let (values, partial) = (storage("noise values", count), storage("noise partial sums", count / CHUNK));
         let (low_view, high_view) = (low.create_view(&Default::default()), high.create_view(&Default::default()));
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cloud noise") });
+        let mut encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("cloud noise") });
         let cube = |n: u32| [n / 4, n / 4, n / 4];
         let passes: [(&'static str, &wgpu::Buffer, Option<&wgpu::TextureView>, [u32; 3]); 5] = [
             ("low_values", &low_params, None, cube(LOW_SIZE)),
@@ -93,8 +101,15 @@ impl CloudNoise {
             if let Some(view) = target {
                 entries.push(wgpu::BindGroupEntry { binding: 3, resource: wgpu::BindingResource::TextureView(view) });
             }
-            let bind = gpu.checked("cloud noise bind group", || gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(entry), layout: &layout, entries: &entries }))?;
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(entry), timestamp_writes: None });
+            let bind = gpu.checked("cloud noise bind group", || {
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some(entry),
+                    layout: &layout,
+                    entries: &entries,
+                })
+            })?;
+            let mut pass =
+                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(entry), timestamp_writes: None });
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
             pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
@@ -105,7 +120,8 @@ impl CloudNoise {
 
     /// One texture's values (R), x fastest, then y, then z.
     pub fn read(gpu: &Gpu, texture: &wgpu::Texture) -> Result<Vec<f32>, PreviewError> {
-        let encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("noise readback") });
+        let encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("noise readback") });
         Ok(gpu.read_rgba16f(encoder, texture)?.into_iter().map(|t| t[0]).collect())
     }
 }

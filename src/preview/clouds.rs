@@ -60,7 +60,17 @@ pub struct CloudSettings {
 
 impl Default for CloudSettings {
     fn default() -> Self {
-        CloudSettings { cover: 0.4, wind_offset_km: [0.0, 0.0], planet_radius_km: 6371.0, base_km: 1.5, top_km: 5.0, extinction_per_km: 40.0, samples: 4, steps: 48, seed: 1 }
+        CloudSettings {
+            cover: 0.4,
+            wind_offset_km: [0.0, 0.0],
+            planet_radius_km: 6371.0,
+            base_km: 1.5,
+            top_km: 5.0,
+            extinction_per_km: 40.0,
+            samples: 4,
+            steps: 48,
+            seed: 1,
+        }
     }
 }
 
@@ -132,7 +142,12 @@ pub struct StepReport {
     pub blend: f64,
 }
 
-fn storage_texture(gpu: &Gpu, label: &'static str, size: [u32; 3], dimension: wgpu::TextureDimension) -> Result<wgpu::Texture, PreviewError> {
+fn storage_texture(
+    gpu: &Gpu,
+    label: &'static str,
+    size: [u32; 3],
+    dimension: wgpu::TextureDimension,
+) -> Result<wgpu::Texture, PreviewError> {
     gpu.checked(label, || {
         gpu.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
@@ -141,20 +156,34 @@ fn storage_texture(gpu: &Gpu, label: &'static str, size: [u32; 3], dimension: wg
             sample_count: 1,
             dimension,
             format: wgpu::TextureFormat::Rgba16Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC | wgpu::TextureUsages::COPY_DST,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC
+                | wgpu::TextureUsages::COPY_DST,
             view_formats: &[],
         })
     })
 }
 
 /// The clouds shader's `Params`.
-fn params(settings: &CloudSettings, weather: &Weather, gbuffer_size: u32, first_sample: u32, tiles: [f64; 4]) -> Vec<f32> {
-    let to_sun = crate::render::camera::direction_deg(90.0 - weather.sun_elevation_deg, weather.sun_azimuth_deg);
+fn params(
+    settings: &CloudSettings,
+    weather: &Weather,
+    gbuffer_size: u32,
+    first_sample: u32,
+    tiles: [f64; 4],
+) -> Vec<f32> {
+    let to_sun = crate::directions::camera::direction_deg(90.0 - weather.sun_elevation_deg, weather.sun_azimuth_deg);
     let [a, b, c] = OCTAVES_ABC.map(f64::from);
     [
         [settings.planet_radius_km, settings.base_km, settings.top_km, 0.5 * CUMULUS_SPAN_KM],
         [to_sun.x, to_sun.y, to_sun.z, settings.cover.clamp(0.0, 1.0)],
-        [settings.wind_offset_km[0], settings.wind_offset_km[1], f64::from(gbuffer_size), f64::from(settings.samples.max(1))],
+        [
+            settings.wind_offset_km[0],
+            settings.wind_offset_km[1],
+            f64::from(gbuffer_size),
+            f64::from(settings.samples.max(1)),
+        ],
         [settings.extinction_per_km, a, b, c],
         [f64::from(first_sample), f64::from(settings.seed), f64::from(settings.steps.max(1)), 0.0],
         tiles,
@@ -171,7 +200,9 @@ impl Clouds {
     /// `gbuffer_size`² texels.
     pub fn new(gpu: &Gpu, coverage: &[[u8; 4]], gbuffer_size: u32, seed: u32) -> Result<Clouds, PreviewError> {
         if coverage.len() != (COVERAGE_WIDTH * COVERAGE_HEIGHT) as usize || gbuffer_size == 0 {
-            return Err(PreviewError::Bake("the coverage texture must be 256 x 128 and the G-buffer at least 1 texel".into()));
+            return Err(PreviewError::Bake(
+                "the coverage texture must be 256 x 128 and the G-buffer at least 1 texel".into(),
+            ));
         }
         let noise = CloudNoise::new(gpu, seed)?;
         let bytes: Vec<u8> = coverage.iter().flatten().copied().collect();
@@ -197,7 +228,11 @@ impl Clouds {
         let shadow = storage_texture(gpu, "distant-cloud shadow", SHADOW_CELLS, wgpu::TextureDimension::D3)?;
         let occlusion = storage_texture(gpu, "cloud occlusion", OCCLUSION_CELLS, wgpu::TextureDimension::D3)?;
         let g = [gbuffer_size, gbuffer_size, 1];
-        let buffers = [storage_texture(gpu, "cloud G-buffer", g, d2)?, storage_texture(gpu, "cloud G-buffer", g, d2)?, storage_texture(gpu, "cloud G-buffer", g, d2)?];
+        let buffers = [
+            storage_texture(gpu, "cloud G-buffer", g, d2)?,
+            storage_texture(gpu, "cloud G-buffer", g, d2)?,
+            storage_texture(gpu, "cloud G-buffer", g, d2)?,
+        ];
         let texels = u64::from(gbuffer_size) * u64::from(gbuffer_size);
         let accum = gpu.checked("G-buffer sums", || {
             gpu.device.create_buffer(&wgpu::BufferDescriptor {
@@ -218,13 +253,18 @@ impl Clouds {
                 ..Default::default()
             })
         };
-        let (clamped, repeating) = (sampler("clamped", wgpu::AddressMode::ClampToEdge), sampler("repeating", wgpu::AddressMode::Repeat));
+        let (clamped, repeating) =
+            (sampler("clamped", wgpu::AddressMode::ClampToEdge), sampler("repeating", wgpu::AddressMode::Repeat));
         let module = gpu.module("clouds.wgsl", super::shaders::CLOUDS)?;
         use wgpu::BufferBindingType::{Storage, Uniform};
         let sampled = |binding| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: true }, view_dimension: wgpu::TextureViewDimension::D2, multisampled: false },
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
             count: None,
         };
         let light_entries = [
@@ -232,10 +272,16 @@ impl Clouds {
             buffer_entry(1, Storage { read_only: true }),
             buffer_entry(2, Storage { read_only: false }),
             sampled(3),
-            wgpu::BindGroupLayoutEntry { binding: 4, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering), count: None },
+            wgpu::BindGroupLayoutEntry {
+                binding: 4,
+                visibility: wgpu::ShaderStages::COMPUTE,
+                ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                count: None,
+            },
             sampled(5),
         ];
-        let (light_layout, light) = gpu.compute_pipeline("cloud lighting", super::shaders::CLOUD_LIGHTING, "light", &light_entries)?;
+        let (light_layout, light) =
+            gpu.compute_pipeline("cloud lighting", super::shaders::CLOUD_LIGHTING, "light", &light_entries)?;
         let pipelines = Pipelines {
             cumulus: gpu.compute_pipeline_auto("cumulus map", &module, "cumulus_map")?,
             shadow: gpu.compute_pipeline_auto("distant-cloud shadow", &module, "shadow_volume")?,
@@ -246,8 +292,21 @@ impl Clouds {
             light_layout,
             light,
         };
-        let clouds =
-            Clouds { noise, coverage: coverage.create_view(&Default::default()), cumulus, shadow, occlusion, buffers, accum, clamped, repeating, pipelines, frame_in_cycle: 0, cycles: 0, blend: 1.0 };
+        let clouds = Clouds {
+            noise,
+            coverage: coverage.create_view(&Default::default()),
+            cumulus,
+            shadow,
+            occlusion,
+            buffers,
+            accum,
+            clamped,
+            repeating,
+            pipelines,
+            frame_in_cycle: 0,
+            cycles: 0,
+            blend: 1.0,
+        };
         clouds.clear_sums(gpu)?;
         Ok(clouds)
     }
@@ -258,7 +317,8 @@ impl Clouds {
     }
 
     fn clear_sums(&self, gpu: &Gpu) -> Result<(), PreviewError> {
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clear G-buffer sums") });
+        let mut encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clear G-buffer sums") });
         encoder.clear_buffer(&self.accum, 0, None);
         gpu.checked("clear G-buffer sums", || gpu.queue.submit([encoder.finish()]))?;
         Ok(())
@@ -267,9 +327,18 @@ impl Clouds {
     /// Records one pass of the clouds shader with the bindings its entry
     /// point uses (a derived layout holds exactly those, and a bind group
     /// must give exactly them); `target` is the G-buffer it writes.
-    fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, pass: Pass, uniform: &wgpu::Buffer, target: Option<&wgpu::Texture>, groups: [u32; 3]) -> Result<(), PreviewError> {
+    fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        pass: Pass,
+        uniform: &wgpu::Buffer,
+        target: Option<&wgpu::Texture>,
+        groups: [u32; 3],
+    ) -> Result<(), PreviewError> {
         let view = |t: &wgpu::Texture| t.create_view(&Default::default());
-        let (cumulus, shadow, low, high) = (view(&self.cumulus), view(&self.shadow), view(&self.noise.low), view(&self.noise.high));
+        let (cumulus, shadow, low, high) =
+            (view(&self.cumulus), view(&self.shadow), view(&self.noise.low), view(&self.noise.high));
         let occlusion = view(&self.occlusion);
         let target = target.map(view);
         use wgpu::BindingResource::{Sampler, TextureView};
@@ -286,7 +355,9 @@ impl Clouds {
                 0 => uniform.as_entire_binding(),
                 1 | 4 => TextureView(&cumulus),
                 2 | 8 => TextureView(&shadow),
-                3 => TextureView(target.as_ref().ok_or_else(|| PreviewError::Bake("a G-buffer pass without a target".into()))?),
+                3 => TextureView(
+                    target.as_ref().ok_or_else(|| PreviewError::Bake("a G-buffer pass without a target".into()))?,
+                ),
                 5 => TextureView(&self.coverage),
                 6 => TextureView(&low),
                 7 => TextureView(&high),
@@ -296,10 +367,20 @@ impl Clouds {
                 _ => self.accum.as_entire_binding(),
             })
         };
-        let entries = wants.iter().map(|&b| Ok(wgpu::BindGroupEntry { binding: b, resource: resource(b)? })).collect::<Result<Vec<_>, PreviewError>>()?;
+        let entries = wants
+            .iter()
+            .map(|&b| Ok(wgpu::BindGroupEntry { binding: b, resource: resource(b)? }))
+            .collect::<Result<Vec<_>, PreviewError>>()?;
         let layout = pipeline.get_bind_group_layout(0);
-        let bind = gpu.checked("cloud bind group", || gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("clouds"), layout: &layout, entries: &entries }))?;
-        let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("clouds"), timestamp_writes: None });
+        let bind = gpu.checked("cloud bind group", || {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("clouds"),
+                layout: &layout,
+                entries: &entries,
+            })
+        })?;
+        let mut compute =
+            encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("clouds"), timestamp_writes: None });
         compute.set_pipeline(pipeline);
         compute.set_bind_group(0, &bind, &[]);
         compute.dispatch_workgroups(groups[0], groups[1], groups[2]);
@@ -308,7 +389,12 @@ impl Clouds {
 
     /// Records the cumulus map, the shadow volume and the occlusion grid
     /// for `weather`.
-    fn record_environment(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, uniform: &wgpu::Buffer) -> Result<(), PreviewError> {
+    fn record_environment(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        uniform: &wgpu::Buffer,
+    ) -> Result<(), PreviewError> {
         self.record(gpu, encoder, Pass::Cumulus, uniform, None, [CUMULUS_SIZE / 8, CUMULUS_SIZE / 8, 1])?;
         self.record(gpu, encoder, Pass::Shadow, uniform, None, SHADOW_CELLS.map(|n| n / 4))?;
         self.record(gpu, encoder, Pass::Occlusion, uniform, None, OCCLUSION_CELLS.map(|n| n.div_ceil(4)))
@@ -331,14 +417,31 @@ impl Clouds {
     /// `settings.samples` marches a texel numbered from `first_sample` (a
     /// different first sample: an independent G-buffer), shown at once
     /// (previous and current both this one). Returns the wall time, s.
-    pub fn compute(&mut self, gpu: &Gpu, weather: &Weather, settings: &CloudSettings, first_sample: u32) -> Result<f64, PreviewError> {
+    pub fn compute(
+        &mut self,
+        gpu: &Gpu,
+        weather: &Weather,
+        settings: &CloudSettings,
+        first_sample: u32,
+    ) -> Result<f64, PreviewError> {
         let start = std::time::Instant::now();
         let n = self.gbuffer_size();
         let uniform = gpu.uniform("cloud params", &params(settings, weather, n, first_sample, [0.0; 4]));
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clouds") });
         self.record_environment(gpu, &mut encoder, &uniform)?;
-        self.record(gpu, &mut encoder, Pass::Whole, &uniform, Some(&self.buffers[1]), [n.div_ceil(8), n.div_ceil(8), 1])?;
-        encoder.copy_texture_to_texture(self.buffers[1].as_image_copy(), self.buffers[0].as_image_copy(), self.buffers[1].size());
+        self.record(
+            gpu,
+            &mut encoder,
+            Pass::Whole,
+            &uniform,
+            Some(&self.buffers[1]),
+            [n.div_ceil(8), n.div_ceil(8), 1],
+        )?;
+        encoder.copy_texture_to_texture(
+            self.buffers[1].as_image_copy(),
+            self.buffers[0].as_image_copy(),
+            self.buffers[1].size(),
+        );
         Self::submit(gpu, encoder)?;
         self.blend = 1.0;
         Ok(start.elapsed().as_secs_f64())
@@ -350,7 +453,13 @@ impl Clouds {
     /// `settings.samples` × F frames the sums resolved into a G-buffer that
     /// becomes the current one, the old current the previous, and the
     /// display's blend starts again from the previous.
-    pub fn step(&mut self, gpu: &Gpu, weather: &Weather, settings: &CloudSettings, schedule: &Amortisation) -> Result<StepReport, PreviewError> {
+    pub fn step(
+        &mut self,
+        gpu: &Gpu,
+        weather: &Weather,
+        settings: &CloudSettings,
+        schedule: &Amortisation,
+    ) -> Result<StepReport, PreviewError> {
         let per_sample = schedule.frames_per_sample;
         if per_sample == 0 || 64 % per_sample != 0 {
             return Err(PreviewError::Bake(format!("frames per sample must divide 64, got {per_sample}")));
@@ -360,17 +469,32 @@ impl Clouds {
         let first = self.cycles.wrapping_mul(samples);
         let tiles = [f64::from(self.frame_in_cycle), f64::from(per_sample), f64::from(first), 1.0];
         let uniform = gpu.uniform("cloud params", &params(settings, weather, n, first, tiles));
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("amortised clouds") });
+        let mut encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("amortised clouds") });
         if self.frame_in_cycle == 0 {
             self.record_environment(gpu, &mut encoder, &uniform)?;
         }
         let invocations = n.div_ceil(TILE).pow(2) * (64 / per_sample);
-        self.record(gpu, &mut encoder, Pass::Tiles, &uniform, Some(&self.buffers[2]), [invocations.div_ceil(64), 1, 1])?;
+        self.record(
+            gpu,
+            &mut encoder,
+            Pass::Tiles,
+            &uniform,
+            Some(&self.buffers[2]),
+            [invocations.div_ceil(64), 1, 1],
+        )?;
         self.frame_in_cycle += 1;
         self.blend = (self.blend + 1.0 / f64::from(schedule.blend_frames.max(1))).min(1.0);
         let swapped = self.frame_in_cycle == samples * per_sample;
         if swapped {
-            self.record(gpu, &mut encoder, Pass::Resolve, &uniform, Some(&self.buffers[2]), [n.div_ceil(8), n.div_ceil(8), 1])?;
+            self.record(
+                gpu,
+                &mut encoder,
+                Pass::Resolve,
+                &uniform,
+                Some(&self.buffers[2]),
+                [n.div_ceil(8), n.div_ceil(8), 1],
+            )?;
         }
         Self::submit(gpu, encoder)?;
         if swapped {
@@ -385,11 +509,31 @@ impl Clouds {
     /// What the amortised G-buffer being computed holds so far: each
     /// texel's marches of this cycle averaged (0 where none yet), without
     /// disturbing the cycle.
-    pub fn read_progress(&self, gpu: &Gpu, settings: &CloudSettings) -> Result<(Vec<[f32; 4]>, Vec<f32>), PreviewError> {
+    pub fn read_progress(
+        &self,
+        gpu: &Gpu,
+        settings: &CloudSettings,
+    ) -> Result<(Vec<[f32; 4]>, Vec<f32>), PreviewError> {
         let n = self.gbuffer_size();
         let scratch = storage_texture(gpu, "G-buffer progress", [n, n, 1], wgpu::TextureDimension::D2)?;
-        let uniform = gpu.uniform("cloud params", &params(settings, &Weather { sun_elevation_deg: 0.0, sun_azimuth_deg: 0.0, haziness: 0.0, cloudiness: 0.0, sun_disk: false }, n, 0, [0.0; 4]));
-        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("G-buffer progress") });
+        let uniform = gpu.uniform(
+            "cloud params",
+            &params(
+                settings,
+                &Weather {
+                    sun_elevation_deg: 0.0,
+                    sun_azimuth_deg: 0.0,
+                    haziness: 0.0,
+                    cloudiness: 0.0,
+                    sun_disk: false,
+                },
+                n,
+                0,
+                [0.0; 4],
+            ),
+        );
+        let mut encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("G-buffer progress") });
         self.record(gpu, &mut encoder, Pass::Resolve, &uniform, Some(&scratch), [n.div_ceil(8), n.div_ceil(8), 1])?;
         let texels = gpu.read_rgba16f(encoder, &scratch)?;
         let sums = super::frame::read_buffer(gpu, &self.accum)?;
@@ -400,19 +544,40 @@ impl Clouds {
     /// The current G-buffer's texels, row after row (see the module for
     /// the channels).
     pub fn read_gbuffer(&self, gpu: &Gpu) -> Result<Vec<[f32; 4]>, PreviewError> {
-        let encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("G-buffer readback") });
+        let encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("G-buffer readback") });
         gpu.read_rgba16f(encoder, &self.buffers[1])
     }
 
     /// Records the lighting pass into `frame` (after the sky pass): the
     /// displayed G-buffer (previous and current blended) lit by the
     /// frame's sun and sky over the sky so far.
-    pub fn encode_lighting(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather) -> Result<(), PreviewError> {
+    pub fn encode_lighting(
+        &self,
+        gpu: &Gpu,
+        frame: &mut Frame,
+        luts: &Luts,
+        weather: &Weather,
+    ) -> Result<(), PreviewError> {
         let (e, h, c) = (weather.sun_elevation_deg, weather.haziness, weather.cloudiness);
-        let sun = luts.sun(e, h, c).ok_or_else(|| PreviewError::Bake("the bake has no sunlight LUT (made before it): bake it again to light the clouds".into()))?;
-        let ambient = luts.ambient(e, h, c).ok_or_else(|| PreviewError::Bake("the bake has no ambient LUT (made before it): bake it again to light the clouds".into()))?;
-        let params: Vec<f32> = sun.irradiance_rgb.iter().chain(&[0.0]).chain(&ambient.mean_radiance).chain(&[self.blend]).map(|&x| x as f32).collect();
-        let (current, previous) = (self.buffers[1].create_view(&Default::default()), self.buffers[0].create_view(&Default::default()));
+        let sun = luts.sun(e, h, c).ok_or_else(|| {
+            PreviewError::Bake(
+                "the bake has no sunlight LUT (made before it): bake it again to light the clouds".into(),
+            )
+        })?;
+        let ambient = luts.ambient(e, h, c).ok_or_else(|| {
+            PreviewError::Bake("the bake has no ambient LUT (made before it): bake it again to light the clouds".into())
+        })?;
+        let params: Vec<f32> = sun
+            .irradiance_rgb
+            .iter()
+            .chain(&[0.0])
+            .chain(&ambient.mean_radiance)
+            .chain(&[self.blend])
+            .map(|&x| x as f32)
+            .collect();
+        let (current, previous) =
+            (self.buffers[1].create_view(&Default::default()), self.buffers[0].create_view(&Default::default()));
         let bind = gpu.checked("cloud lighting bind group", || {
             let uniform = frame.uniform("cloud lighting params", &params);
             gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {

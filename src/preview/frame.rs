@@ -2,7 +2,7 @@
 //! the passes share, one command encoder, and the GPU's time per pass.
 //!
 //! A frame works on a list of directions (one per pixel; `None` outside the
-//! camera's view), so that the cameras stay the CPU's (`render::camera`)
+//! camera's view), so that the cameras stay the CPU's (`directions::camera`)
 //! and every pass can be read back and checked against the CPU decoder
 //! direction by direction. The buffers, one `vec4<f32>` per direction:
 //! - `directions`: the unit vector (world frame, z up), w = 1 where the
@@ -61,19 +61,37 @@ impl<'g> Frame<'g> {
     pub fn new(gpu: &'g Gpu, dirs: &[Option<DVec3>]) -> Result<Frame<'g>, PreviewError> {
         let start = Instant::now();
         let count = dirs.len();
-        let mut data: Vec<f32> = dirs.iter().flat_map(|d| d.map_or([0.0; 4], |d| [d.x as f32, d.y as f32, d.z as f32, 1.0])).collect();
+        let mut data: Vec<f32> =
+            dirs.iter().flat_map(|d| d.map_or([0.0; 4], |d| [d.x as f32, d.y as f32, d.z as f32, 1.0])).collect();
         if data.is_empty() {
             data = vec![0.0; 4];
         }
         let size = 4 * data.len() as u64;
         let (directions, surface, radiance, queries) = gpu.checked("frame buffers", || {
-            let directions = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("directions"), contents: &f32_bytes(&data), usage: wgpu::BufferUsages::STORAGE });
-            let storage =
-                |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC, mapped_at_creation: false });
-            let queries = gpu.has_timestamps().then(|| gpu.device.create_query_set(&wgpu::QuerySetDescriptor { label: Some("pass times"), ty: wgpu::QueryType::Timestamp, count: 2 * MAX_TIMED }));
+            let directions = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("directions"),
+                contents: &f32_bytes(&data),
+                usage: wgpu::BufferUsages::STORAGE,
+            });
+            let storage = |label| {
+                gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                })
+            };
+            let queries = gpu.has_timestamps().then(|| {
+                gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                    label: Some("pass times"),
+                    ty: wgpu::QueryType::Timestamp,
+                    count: 2 * MAX_TIMED,
+                })
+            });
             (directions, storage("surface"), storage("radiance"), queries)
         })?;
-        let encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("preview frame") });
+        let encoder =
+            gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("preview frame") });
         Ok(Frame { gpu, directions, surface, radiance, count, encoder, queries, passes: Vec::new(), start })
     }
 
@@ -90,14 +108,22 @@ impl<'g> Frame<'g> {
 
     /// Records a pass of `groups` workgroups (a pass over something other
     /// than the directions), timed as `name`.
-    pub fn dispatch_groups(&mut self, name: &'static str, pipeline: &wgpu::ComputePipeline, bind: &wgpu::BindGroup, groups: [u32; 3]) {
+    pub fn dispatch_groups(
+        &mut self,
+        name: &'static str,
+        pipeline: &wgpu::ComputePipeline,
+        bind: &wgpu::BindGroup,
+        groups: [u32; 3],
+    ) {
         let index = self.passes.len() as u32;
-        let timestamp_writes = self.queries.as_ref().filter(|_| index < MAX_TIMED).map(|q| wgpu::ComputePassTimestampWrites {
-            query_set: q,
-            beginning_of_pass_write_index: Some(2 * index),
-            end_of_pass_write_index: Some(2 * index + 1),
-        });
-        let mut pass = self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes });
+        let timestamp_writes =
+            self.queries.as_ref().filter(|_| index < MAX_TIMED).map(|q| wgpu::ComputePassTimestampWrites {
+                query_set: q,
+                beginning_of_pass_write_index: Some(2 * index),
+                end_of_pass_write_index: Some(2 * index + 1),
+            });
+        let mut pass =
+            self.encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(name), timestamp_writes });
         pass.set_pipeline(pipeline);
         pass.set_bind_group(0, bind, &[]);
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
@@ -116,8 +142,14 @@ impl<'g> Frame<'g> {
         let gpu = self.gpu;
         let size = self.radiance.size();
         let timed = (self.passes.len() as u32).min(MAX_TIMED);
-        let readback =
-            |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let readback = |label| {
+            gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
         let (rgb_back, surface_back) = (readback("radiance readback"), readback("surface readback"));
         self.encoder.copy_buffer_to_buffer(&self.radiance, 0, &rgb_back, 0, size);
         self.encoder.copy_buffer_to_buffer(&self.surface, 0, &surface_back, 0, size);
@@ -147,15 +179,22 @@ impl<'g> Frame<'g> {
         let rgb_bytes = map(gpu, &rgb_back)?;
         let surface_bytes = map(gpu, &surface_back)?;
         let seconds = self.start.elapsed().as_secs_f64();
-        let floats =
-            |b: &[u8]| b.chunks_exact(16).take(self.count).map(|c| std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))).collect::<Vec<[f32; 4]>>();
+        let floats = |b: &[u8]| {
+            b.chunks_exact(16)
+                .take(self.count)
+                .map(|c| {
+                    std::array::from_fn(|k| f32::from_le_bytes([c[4 * k], c[4 * k + 1], c[4 * k + 2], c[4 * k + 3]]))
+                })
+                .collect::<Vec<[f32; 4]>>()
+        };
         let picture = floats(&rgb_bytes);
         let rgb = picture.iter().map(|v| [v[0], v[1], v[2]]).collect();
         let alpha = picture.iter().map(|v| v[3]).collect();
         let surface = floats(&surface_bytes);
         let mut passes = Vec::new();
         if let Some(back) = times_back {
-            let ticks: Vec<u64> = map(gpu, &back)?.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
+            let ticks: Vec<u64> =
+                map(gpu, &back)?.chunks_exact(8).map(|c| u64::from_le_bytes(c.try_into().expect("8 bytes"))).collect();
             let period_s = f64::from(gpu.queue.get_timestamp_period()) * 1e-9;
             for (k, name) in self.passes.iter().take(timed as usize).enumerate() {
                 passes.push((*name, ticks[2 * k + 1].saturating_sub(ticks[2 * k]) as f64 * period_s));

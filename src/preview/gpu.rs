@@ -16,7 +16,8 @@ impl Gpu {
     /// Opens the adapter the environment names, or the default one.
     pub fn new() -> Result<Gpu, PreviewError> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(&instance, None)).map_err(|e| PreviewError::NoAdapter(e.to_string()))?;
+        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(&instance, None))
+            .map_err(|e| PreviewError::NoAdapter(e.to_string()))?;
         // Timestamp queries where the adapter has them (lavapipe does), for
         // per-pass GPU times; nothing else beyond the defaults.
         let wanted = wgpu::Features::TIMESTAMP_QUERY;
@@ -43,7 +44,15 @@ impl Gpu {
 
     /// A 2-D array texture of `format` made from `bytes` (layer after
     /// layer, rows of texels), as a view for `textureLoad`.
-    pub fn array_texture(&self, label: &str, format: wgpu::TextureFormat, width: usize, height: usize, layers: usize, bytes: &[u8]) -> Result<wgpu::TextureView, PreviewError> {
+    pub fn array_texture(
+        &self,
+        label: &str,
+        format: wgpu::TextureFormat,
+        width: usize,
+        height: usize,
+        layers: usize,
+        bytes: &[u8],
+    ) -> Result<wgpu::TextureView, PreviewError> {
         use wgpu::util::DeviceExt;
         let size = wgpu::Extent3d { width: width as u32, height: height as u32, depth_or_array_layers: layers as u32 };
         let texture = self.checked("texture upload", || {
@@ -63,16 +72,33 @@ impl Gpu {
                 bytes,
             )
         })?;
-        Ok(texture.create_view(&wgpu::TextureViewDescriptor { dimension: Some(wgpu::TextureViewDimension::D2Array), ..Default::default() }))
+        Ok(texture.create_view(&wgpu::TextureViewDescriptor {
+            dimension: Some(wgpu::TextureViewDimension::D2Array),
+            ..Default::default()
+        }))
     }
 
     /// A compute pipeline of `entry` in the WGSL `source`, with one bind
     /// group of `entries`.
-    pub fn compute_pipeline(&self, label: &'static str, source: &str, entry: &str, entries: &[wgpu::BindGroupLayoutEntry]) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), PreviewError> {
+    pub fn compute_pipeline(
+        &self,
+        label: &'static str,
+        source: &str,
+        entry: &str,
+        entries: &[wgpu::BindGroupLayoutEntry],
+    ) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), PreviewError> {
         self.checked(label, || {
-            let layout = self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
-            let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) });
-            let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor { label: Some(label), bind_group_layouts: &[Some(&layout)], immediate_size: 0 });
+            let layout =
+                self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
+            let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(&layout)],
+                immediate_size: 0,
+            });
             let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
                 layout: Some(&pipeline_layout),
@@ -89,7 +115,12 @@ impl Gpu {
     /// wgpu derives from the shader (`pipeline.get_bind_group_layout(0)`):
     /// for modules of several entry points, each using some of the
     /// bindings.
-    pub fn compute_pipeline_auto(&self, label: &'static str, module: &wgpu::ShaderModule, entry: &str) -> Result<wgpu::ComputePipeline, PreviewError> {
+    pub fn compute_pipeline_auto(
+        &self,
+        label: &'static str,
+        module: &wgpu::ShaderModule,
+        entry: &str,
+    ) -> Result<wgpu::ComputePipeline, PreviewError> {
         self.checked(label, || {
             self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
                 label: Some(label),
@@ -105,17 +136,30 @@ impl Gpu {
     /// A uniform buffer holding `values`.
     pub fn uniform(&self, label: &'static str, values: &[f32]) -> wgpu::Buffer {
         use wgpu::util::DeviceExt;
-        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &f32_bytes(values), usage: wgpu::BufferUsages::UNIFORM })
+        self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some(label),
+            contents: &f32_bytes(values),
+            usage: wgpu::BufferUsages::UNIFORM,
+        })
     }
 
     /// The shader module of WGSL `source`.
     pub fn module(&self, label: &'static str, source: &str) -> Result<wgpu::ShaderModule, PreviewError> {
-        self.checked(label, || self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(source.into()) }))
+        self.checked(label, || {
+            self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            })
+        })
     }
 
     /// Submits `encoder` and reads `texture` (RGBA16F, one mip) back as
     /// RGBA f32 texels, layer after layer, row after row.
-    pub fn read_rgba16f(&self, mut encoder: wgpu::CommandEncoder, texture: &wgpu::Texture) -> Result<Vec<[f32; 4]>, PreviewError> {
+    pub fn read_rgba16f(
+        &self,
+        mut encoder: wgpu::CommandEncoder,
+        texture: &wgpu::Texture,
+    ) -> Result<Vec<[f32; 4]>, PreviewError> {
         let size = texture.size();
         let depth = match texture.dimension() {
             wgpu::TextureDimension::D3 => size.depth_or_array_layers,
@@ -131,7 +175,14 @@ impl Gpu {
         });
         encoder.copy_texture_to_buffer(
             texture.as_image_copy(),
-            wgpu::TexelCopyBufferInfo { buffer: &buffer, layout: wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(row), rows_per_image: Some(size.height) } },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &buffer,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(size.height),
+                },
+            },
             wgpu::Extent3d { width: size.width, height: size.height, depth_or_array_layers: depth },
         );
         self.checked("texture readback", || self.queue.submit([encoder.finish()]))?;
@@ -140,7 +191,8 @@ impl Gpu {
         for r in 0..(size.height * depth) as usize {
             let line = &data[r * row as usize..];
             for x in 0..size.width as usize {
-                let h: [u16; 4] = std::array::from_fn(|c| u16::from_le_bytes([line[8 * x + 2 * c], line[8 * x + 2 * c + 1]]));
+                let h: [u16; 4] =
+                    std::array::from_fn(|c| u16::from_le_bytes([line[8 * x + 2 * c], line[8 * x + 2 * c + 1]]));
                 out.push(crate::lut::rgba16f::unpack(h));
             }
         }
@@ -161,7 +213,12 @@ impl Gpu {
 
 /// A compute shader's buffer binding: uniform, or storage read-only or not.
 pub fn buffer_entry(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
-    wgpu::BindGroupLayoutEntry { binding, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None }, count: None }
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+        count: None,
+    }
 }
 
 /// A compute shader's 2-D array texture binding, read by `textureLoad`
@@ -170,7 +227,11 @@ pub fn array_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility: wgpu::ShaderStages::COMPUTE,
-        ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: false }, view_dimension: wgpu::TextureViewDimension::D2Array, multisampled: false },
+        ty: wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2Array,
+            multisampled: false,
+        },
         count: None,
     }
 }

@@ -67,7 +67,8 @@ pub struct LandscapePass {
 fn halves(texels: &[[f32; 3]], what: &str) -> Result<Vec<u8>, PreviewError> {
     let mut bytes = Vec::with_capacity(8 * texels.len());
     for t in texels {
-        let h = rgba16f::pack(t.map(f64::from)).map_err(|e| PreviewError::Bake(format!("{what}: a texel does not pack: {e}")))?;
+        let h = rgba16f::pack(t.map(f64::from))
+            .map_err(|e| PreviewError::Bake(format!("{what}: a texel does not pack: {e}")))?;
         bytes.extend(h.iter().flat_map(|x| x.to_le_bytes()));
     }
     Ok(bytes)
@@ -89,33 +90,67 @@ impl LandscapePass {
             };
             let layers = |first: usize| -> Result<Vec<u8>, PreviewError> {
                 let mut bytes = Vec::new();
-                for layer in textures.fog.get(first..first + f.slices).ok_or_else(|| PreviewError::Bake(format!("{}: the fog file is short of layers", f.name)))? {
+                for layer in textures
+                    .fog
+                    .get(first..first + f.slices)
+                    .ok_or_else(|| PreviewError::Bake(format!("{}: the fog file is short of layers", f.name)))?
+                {
                     bytes.extend(halves(layer, &f.name)?);
                 }
                 Ok(bytes)
             };
-            let lit = gpu.array_texture(&f.name, format, entry.width, entry.height, f.slices, &layers(f.first_layer)?)?;
-            let shadowed = gpu.array_texture(&f.name, format, entry.width, entry.height, f.slices, &layers(f.first_layer + f.slices)?)?;
+            let lit =
+                gpu.array_texture(&f.name, format, entry.width, entry.height, f.slices, &layers(f.first_layer)?)?;
+            let shadowed = gpu.array_texture(
+                &f.name,
+                format,
+                entry.width,
+                entry.height,
+                f.slices,
+                &layers(f.first_layer + f.slices)?,
+            )?;
             fog.push(Some(SkyFog { lit, shadowed }));
         }
         let mut bytes = Vec::new();
         for layer in &textures.attenuation {
             bytes.extend(halves(layer, "attenuation")?);
         }
-        let attenuation = gpu.array_texture("attenuation", format, entry.attenuation.width, entry.attenuation.height, textures.attenuation.len(), &bytes)?;
+        let attenuation = gpu.array_texture(
+            "attenuation",
+            format,
+            entry.attenuation.width,
+            entry.attenuation.height,
+            textures.attenuation.len(),
+            &bytes,
+        )?;
         use wgpu::BufferBindingType::{Storage, Uniform};
         let read = Storage { read_only: true };
         let write = Storage { read_only: false };
-        let (terrain_layout, terrain) = gpu.compute_pipeline("terrain", super::shaders::TERRAIN, "terrain", &[buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, write)])?;
-        let mut entries = vec![buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, read), buffer_entry(3, write)];
+        let (terrain_layout, terrain) = gpu.compute_pipeline(
+            "terrain",
+            super::shaders::TERRAIN,
+            "terrain",
+            &[buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, write)],
+        )?;
+        let mut entries =
+            vec![buffer_entry(0, Uniform), buffer_entry(1, read), buffer_entry(2, read), buffer_entry(3, write)];
         entries.extend((4..=10).map(array_entry));
         entries.push(wgpu::BindGroupLayoutEntry {
             binding: 11,
             visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture { sample_type: wgpu::TextureSampleType::Float { filterable: true }, view_dimension: wgpu::TextureViewDimension::D3, multisampled: false },
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
             count: None,
         });
-        entries.push(wgpu::BindGroupLayoutEntry { binding: 12, visibility: wgpu::ShaderStages::COMPUTE, ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering), count: None });
+        entries.push(wgpu::BindGroupLayoutEntry {
+            binding: 12,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+            count: None,
+        });
         let no_grid = gpu.checked("empty occlusion grid", || {
             gpu.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("no occlusion grid"),
@@ -129,7 +164,12 @@ impl LandscapePass {
             })
         })?;
         let no_grid = no_grid.create_view(&Default::default());
-        let clamped = gpu.device.create_sampler(&wgpu::SamplerDescriptor { label: Some("clamped"), mag_filter: wgpu::FilterMode::Linear, min_filter: wgpu::FilterMode::Linear, ..Default::default() });
+        let clamped = gpu.device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("clamped"),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            ..Default::default()
+        });
         let (fog_layout, fog_pipeline) = gpu.compute_pipeline("fog", super::shaders::FOG, "fog", &entries)?;
         Ok(LandscapePass { fog, attenuation, no_grid, clamped, terrain_layout, terrain, fog_layout, fog_pipeline })
     }
@@ -138,7 +178,15 @@ impl LandscapePass {
     /// where a view meets a ridge, the picture becomes the lit ridge seen
     /// through the fog, shaded by the clouds' `grid` where there is one
     /// (else by `ground.cloud_occlusion`).
-    pub fn encode(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather, ground: &Ground, grid: Option<&OcclusionGrid>) -> Result<(), PreviewError> {
+    pub fn encode(
+        &self,
+        gpu: &Gpu,
+        frame: &mut Frame,
+        luts: &Luts,
+        weather: &Weather,
+        ground: &Ground,
+        grid: Option<&OcclusionGrid>,
+    ) -> Result<(), PreviewError> {
         let terrain_params = terrain_params(luts, weather, ground)?;
         let (mut fog_params, active) = fog_params(luts, weather, ground);
         fog_params.extend(match grid {
@@ -192,9 +240,13 @@ impl LandscapePass {
 /// sky's irradiance on an upward surface, the albedo, the ridges.
 fn terrain_params(luts: &Luts, weather: &Weather, ground: &Ground) -> Result<Vec<f32>, PreviewError> {
     let (e, h, c) = (weather.sun_elevation_deg, weather.haziness, weather.cloudiness);
-    let sun = luts.sun(e, h, c).ok_or_else(|| PreviewError::Bake("the bake has no sunlight LUT (made before it): bake it again to light the landscape".into()))?;
-    let ambient = luts.ambient(e, h, c).ok_or_else(|| PreviewError::Bake("the bake has no ambient LUT (made before it): bake it again to light the landscape".into()))?;
-    let to_sun = crate::render::camera::direction_deg(90.0 - e, weather.sun_azimuth_deg);
+    let sun = luts.sun(e, h, c).ok_or_else(|| {
+        PreviewError::Bake("the bake has no sunlight LUT (made before it): bake it again to light the landscape".into())
+    })?;
+    let ambient = luts.ambient(e, h, c).ok_or_else(|| {
+        PreviewError::Bake("the bake has no ambient LUT (made before it): bake it again to light the landscape".into())
+    })?;
+    let to_sun = crate::directions::camera::direction_deg(90.0 - e, weather.sun_azimuth_deg);
     let mut p = vec![to_sun.x as f32, to_sun.y as f32, to_sun.z as f32, ground.albedo as f32];
     p.extend(sun.irradiance_rgb.map(|x| x as f32).into_iter().chain([0.0]));
     p.extend(ambient.irradiance_up.map(|x| x as f32).into_iter().chain([RIDGES.len() as f32]));
@@ -213,17 +265,25 @@ fn terrain_params(luts: &Luts, weather: &Weather, ground: &Ground) -> Result<Vec
 fn fog_params(luts: &Luts, weather: &Weather, ground: &Ground) -> (Vec<f32>, Vec<usize>) {
     let entry = luts.manifest.fog.as_ref().expect("LandscapePass::new checked the fog");
     let fog_of = |name: &str| entry.skies.iter().find(|f| f.name == name);
-    let active: Vec<(usize, &FogSkyEntry, f64)> =
-        active_skies(luts, weather, |name| fog_of(name).is_some()).into_iter().filter_map(|(i, w)| fog_of(&luts.manifest.skies[i].name).map(|f| (i, f, w))).collect();
+    let active: Vec<(usize, &FogSkyEntry, f64)> = active_skies(luts, weather, |name| fog_of(name).is_some())
+        .into_iter()
+        .filter_map(|(i, w)| fog_of(&luts.manifest.skies[i].name).map(|f| (i, f, w)))
+        .collect();
     let azimuth = weather.sun_azimuth_deg.to_radians();
-    let mut p = vec![libm::cos(azimuth) as f32, libm::sin(azimuth) as f32, active.len() as f32, ground.cloud_occlusion as f32];
+    let mut p =
+        vec![libm::cos(azimuth) as f32, libm::sin(azimuth) as f32, active.len() as f32, ground.cloud_occlusion as f32];
     for k in 0..ACTIVE_SKIES {
         match active.get(k) {
             Some(&(i, f, weight)) => {
                 let (i0, i1, t) = slice_pair(&luts.manifest.skies[i], 90.0 - weather.sun_elevation_deg);
                 let s = |log2: i32| (-log2 as f64).exp2() as f32;
                 p.extend([weight as f32, t as f32, i0 as f32, i1 as f32]);
-                p.extend([s(f.fog_scale_log2[i0]), s(f.fog_scale_log2[i1]), s(f.shadowed_scale_log2[i0]), s(f.shadowed_scale_log2[i1])]);
+                p.extend([
+                    s(f.fog_scale_log2[i0]),
+                    s(f.fog_scale_log2[i1]),
+                    s(f.shadowed_scale_log2[i0]),
+                    s(f.shadowed_scale_log2[i1]),
+                ]);
                 p.extend([f.falloff_a as f32, f.falloff_p as f32, f.attenuation_layer as f32, 0.0]);
                 p.extend([f.planet_radius_km as f32, f.observer_altitude_km as f32, entry.ceiling_km as f32, 0.0]);
             }

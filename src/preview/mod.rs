@@ -52,9 +52,11 @@ pub mod shaders {
     /// The benchmark's baseline, a plain textured pass (see `plain_pass`).
     pub const PLAIN_TEXTURE: &str = include_str!("../../shaders/plain_texture.wgsl");
     /// The clouds' noise textures (see `cloud_noise`).
-    pub const CLOUD_NOISE: &str = concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/cloud_noise.wgsl"));
+    pub const CLOUD_NOISE: &str =
+        concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/cloud_noise.wgsl"));
     /// The cumulus map, shadow volume and cloud G-buffer (see `clouds`).
-    pub const CLOUDS: &str = concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/clouds.wgsl"));
+    pub const CLOUDS: &str =
+        concat!(include_str!("../../shaders/hash.wgsl"), include_str!("../../shaders/clouds.wgsl"));
     /// The G-buffer's deferred lighting (see `clouds`).
     pub const CLOUD_LIGHTING: &str = include_str!("../../shaders/cloud_lighting.wgsl");
     /// Every shader, by file name.
@@ -76,8 +78,14 @@ mod tests {
     #[test]
     fn every_shader_validates() {
         for &(name, source) in super::shaders::ALL {
-            let module = wgpu::naga::front::wgsl::parse_str(source).unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
-            wgpu::naga::valid::Validator::new(wgpu::naga::valid::ValidationFlags::all(), wgpu::naga::valid::Capabilities::default()).validate(&module).unwrap_or_else(|e| panic!("{name}: {e:?}"));
+            let module = wgpu::naga::front::wgsl::parse_str(source)
+                .unwrap_or_else(|e| panic!("{name}: {}", e.emit_to_string(source)));
+            wgpu::naga::valid::Validator::new(
+                wgpu::naga::valid::ValidationFlags::all(),
+                wgpu::naga::valid::Capabilities::default(),
+            )
+            .validate(&module)
+            .unwrap_or_else(|e| panic!("{name}: {e:?}"));
         }
     }
 }

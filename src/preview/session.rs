@@ -13,9 +13,9 @@ use super::gpu::Gpu;
 use super::landscape::{Ground, LandscapePass, OcclusionGrid};
 use super::sky_pass::{sun_pixel, SkyPass, Weather};
 use super::PreviewError;
+use crate::directions::camera::Camera;
 use crate::look::timeline::FrameState;
 use crate::lut::decode::{pixel_directions, Luts};
-use crate::render::camera::Camera;
 use glam::DVec3;
 
 /// How the clouds are made.
@@ -83,17 +83,33 @@ impl<'l> PreviewSession<'l> {
     }
 
     /// The next frame, for `state`, through `camera` at `width` x `height`.
-    pub fn render(&mut self, state: &FrameState, camera: &Camera, width: usize, height: usize) -> Result<FrameOutput, PreviewError> {
+    pub fn render(
+        &mut self,
+        state: &FrameState,
+        camera: &Camera,
+        width: usize,
+        height: usize,
+    ) -> Result<FrameOutput, PreviewError> {
         let key = (camera.clone(), width, height);
         if self.view.as_ref().is_none_or(|v| v.0 != key) {
             self.view = Some((key, pixel_directions(camera, width, height)));
         }
         let dirs = &self.view.as_ref().expect("just set").1;
-        let weather =
-            Weather { sun_elevation_deg: state.sun_elevation_deg, sun_azimuth_deg: state.sun_azimuth_deg, haziness: state.haziness, cloudiness: state.cloudiness, sun_disk: self.options.sun_disk };
+        let weather = Weather {
+            sun_elevation_deg: state.sun_elevation_deg,
+            sun_azimuth_deg: state.sun_azimuth_deg,
+            haziness: state.haziness,
+            cloudiness: state.cloudiness,
+            sun_disk: self.options.sun_disk,
+        };
         let (mut cloud_seconds, mut gbuffer_swapped) = (0.0, false);
         if let (Some(clouds), Some(o)) = (self.clouds.as_mut(), &self.options.clouds) {
-            let settings = CloudSettings { cover: state.cumulus_cover, wind_offset_km: state.wind_offset_km, samples: o.samples, ..CloudSettings::default() };
+            let settings = CloudSettings {
+                cover: state.cumulus_cover,
+                wind_offset_km: state.wind_offset_km,
+                samples: o.samples,
+                ..CloudSettings::default()
+            };
             if self.frames == 0 {
                 cloud_seconds = clouds.compute(&self.gpu, &weather, &settings, u32::MAX / 2)?;
             } else {
@@ -111,7 +127,12 @@ impl<'l> PreviewSession<'l> {
         if let (Some(landscape), Some(ground)) = (&self.landscape, &self.options.ground) {
             let view = self.clouds.as_ref().map(|c| c.occlusion_grid());
             let defaults = CloudSettings::default();
-            let grid = view.as_ref().map(|view| OcclusionGrid { view, half_span_km: 0.5 * CUMULUS_SPAN_KM, top_km: defaults.base_km, planet_radius_km: defaults.planet_radius_km });
+            let grid = view.as_ref().map(|view| OcclusionGrid {
+                view,
+                half_span_km: 0.5 * CUMULUS_SPAN_KM,
+                top_km: defaults.base_km,
+                planet_radius_km: defaults.planet_radius_km,
+            });
             landscape.encode(&self.gpu, &mut frame, self.luts, &weather, ground, grid.as_ref())?;
         }
         let rendered = frame.finish()?;

@@ -9,15 +9,16 @@
 //! exactly; `lut::r11g11b10` tests it). The weather rule, the slice pair
 //! and the slices' scales are worked out per frame on the CPU by the very
 //! functions the CPU decoder uses; the shader does the per-direction work.
-//! Directions come from the CPU cameras (`render::camera`): one definition
+//! Directions come from the CPU cameras (`directions::camera`): one definition
 //! of the cameras for the renderer, the CPU decoder and the preview.
 
 use super::frame::{Frame, Rendered};
 use super::gpu::{array_entry, buffer_entry, Gpu};
 use super::PreviewError;
+use crate::directions::mapping;
 use crate::lut::decode::{slice_pair, Luts};
+use crate::lut::r11g11b10;
 use crate::lut::weather::{basis_weights, BASIS};
-use crate::lut::{mapping, r11g11b10};
 use glam::DVec3;
 
 /// At most this many basis skies have weight at once (the weather rule's
@@ -51,17 +52,32 @@ impl SkyPass {
             let mut words = Vec::with_capacity(4 * entry.width * entry.height * entry.layers);
             for layer in &texture.layers {
                 for &t in layer {
-                    let w = r11g11b10::pack_f32(t).map_err(|e| PreviewError::Bake(format!("{}: a texel does not pack: {e}", entry.name)))?;
+                    let w = r11g11b10::pack_f32(t)
+                        .map_err(|e| PreviewError::Bake(format!("{}: a texel does not pack: {e}", entry.name)))?;
                     words.extend_from_slice(&w.to_le_bytes());
                 }
             }
-            textures.push(gpu.array_texture(&entry.name, wgpu::TextureFormat::Rg11b10Ufloat, entry.width, entry.height, entry.layers, &words)?);
+            textures.push(gpu.array_texture(
+                &entry.name,
+                wgpu::TextureFormat::Rg11b10Ufloat,
+                entry.width,
+                entry.height,
+                entry.layers,
+                &words,
+            )?);
         }
         if textures.is_empty() {
             return Err(PreviewError::Bake("the bake has no basis sky".into()));
         }
         use wgpu::BufferBindingType::{Storage, Uniform};
-        let entries = [buffer_entry(0, Uniform), buffer_entry(1, Storage { read_only: true }), buffer_entry(2, Storage { read_only: false }), array_entry(3), array_entry(4), array_entry(5)];
+        let entries = [
+            buffer_entry(0, Uniform),
+            buffer_entry(1, Storage { read_only: true }),
+            buffer_entry(2, Storage { read_only: false }),
+            array_entry(3),
+            array_entry(4),
+            array_entry(5),
+        ];
         let (layout, pipeline) = gpu.compute_pipeline("sky decode", super::shaders::SKY_DECODE, "decode", &entries)?;
         Ok(SkyPass { textures, layout, pipeline })
     }
@@ -80,11 +96,20 @@ impl SkyPass {
     /// [`SkyPass::encode`] with a sun smaller than a pixel put into one
     /// (`sun_pixel`: the direction's index and the radiance to add, from
     /// [`sun_pixel`]).
-    pub fn encode_with_sun_pixel(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather, sun_pixel: Option<(usize, [f64; 3])>) -> Result<(), PreviewError> {
+    pub fn encode_with_sun_pixel(
+        &self,
+        gpu: &Gpu,
+        frame: &mut Frame,
+        luts: &Luts,
+        weather: &Weather,
+        sun_pixel: Option<(usize, [f64; 3])>,
+    ) -> Result<(), PreviewError> {
         let (mut params, active) = frame_params(luts, weather)?;
         match sun_pixel {
             // The index travels as the bits of an f32 (the shader bitcasts it back), plus one: 0 is none.
-            Some((i, rgb)) if weather.sun_disk && i < u32::MAX as usize => params.extend(rgb.map(|x| x as f32).into_iter().chain([f32::from_bits(i as u32 + 1)])),
+            Some((i, rgb)) if weather.sun_disk && i < u32::MAX as usize => {
+                params.extend(rgb.map(|x| x as f32).into_iter().chain([f32::from_bits(i as u32 + 1)]))
+            }
             _ => params.extend([0.0; 4]),
         }
         let bind = gpu.checked("sky decode bind group", || {
@@ -111,7 +136,13 @@ impl SkyPass {
     /// Linear RGB toward each of `dirs` (world frame, z up; None: no
     /// direction, black) under `weather`, decoded on the GPU: a frame of
     /// the sky pass alone.
-    pub fn decode(&self, gpu: &Gpu, luts: &Luts, weather: &Weather, dirs: &[Option<DVec3>]) -> Result<Rendered, PreviewError> {
+    pub fn decode(
+        &self,
+        gpu: &Gpu,
+        luts: &Luts,
+        weather: &Weather,
+        dirs: &[Option<DVec3>],
+    ) -> Result<Rendered, PreviewError> {
         let mut frame = Frame::new(gpu, dirs)?;
         self.encode(gpu, &mut frame, luts, weather)?;
         frame.finish()
@@ -123,12 +154,19 @@ impl SkyPass {
 /// (the shader draws it there) or lies off the image; else the pixel
 /// nearest it and the radiance that puts the sun's irradiance into it, as
 /// the CPU decoder's `decode_image` does (`Luts::sub_pixel_sun`).
-pub fn sun_pixel(luts: &Luts, weather: &Weather, camera: &crate::render::camera::Camera, width: usize, height: usize, dirs: &[Option<DVec3>]) -> Option<(usize, [f64; 3])> {
+pub fn sun_pixel(
+    luts: &Luts,
+    weather: &Weather,
+    camera: &crate::directions::camera::Camera,
+    width: usize,
+    height: usize,
+    dirs: &[Option<DVec3>],
+) -> Option<(usize, [f64; 3])> {
     if !weather.sun_disk {
         return None;
     }
     let sun = luts.sun(weather.sun_elevation_deg, weather.haziness, weather.cloudiness)?;
-    let toward = crate::render::camera::direction_deg(90.0 - weather.sun_elevation_deg, weather.sun_azimuth_deg);
+    let toward = crate::directions::camera::direction_deg(90.0 - weather.sun_elevation_deg, weather.sun_azimuth_deg);
     let cos_radius = libm::cos(0.5 * sun.angular_diameter_deg.to_radians());
     if dirs.iter().flatten().any(|d| d.dot(toward) >= cos_radius) {
         return None;
@@ -143,8 +181,12 @@ pub fn sun_pixel(luts: &Luts, weather: &Weather, camera: &crate::render::camera:
 /// [`ACTIVE_SKIES`].
 pub(crate) fn active_skies(luts: &Luts, weather: &Weather, usable: impl Fn(&str) -> bool) -> Vec<(usize, f64)> {
     let w = basis_weights(weather.haziness, weather.cloudiness);
-    let present: Vec<(usize, f64)> =
-        BASIS.iter().enumerate().filter(|&(k, name)| w[k] > 0.0 && usable(name)).filter_map(|(k, name)| luts.manifest.skies.iter().position(|s| s.name == *name).map(|i| (i, w[k]))).collect();
+    let present: Vec<(usize, f64)> = BASIS
+        .iter()
+        .enumerate()
+        .filter(|&(k, name)| w[k] > 0.0 && usable(name))
+        .filter_map(|(k, name)| luts.manifest.skies.iter().position(|s| s.name == *name).map(|i| (i, w[k])))
+        .collect();
     let total: f64 = present.iter().map(|p| p.1).sum();
     let scale = if total > 0.0 && total < 1.0 { 1.0 / total } else { 1.0 };
     present.into_iter().take(ACTIVE_SKIES).map(|(i, w)| (i, w * scale)).collect()
@@ -160,26 +202,35 @@ pub fn frame_params(luts: &Luts, weather: &Weather) -> Result<(Vec<f32>, Vec<usi
     let sun_zenith_deg = 90.0 - weather.sun_elevation_deg;
     let active = active_skies(luts, weather, |_| true);
     let azimuth = weather.sun_azimuth_deg.to_radians();
-    let mut params = vec![sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG).to_radians() as f32, libm::cos(azimuth) as f32, libm::sin(azimuth) as f32, active.len() as f32];
+    let mut params = vec![
+        sun_zenith_deg.clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG).to_radians() as f32,
+        libm::cos(azimuth) as f32,
+        libm::sin(azimuth) as f32,
+        active.len() as f32,
+    ];
     for k in 0..ACTIVE_SKIES {
         match active.get(k) {
             Some(&(i, weight)) => {
                 let entry = &luts.manifest.skies[i];
                 let (i0, i1, f) = slice_pair(entry, sun_zenith_deg);
                 let slice_scale = |s: usize| (-entry.slices[s].scale_log2 as f64).exp2() as f32;
-                let centred = |s: usize| if entry.slices[s].sun_zenith_deg <= entry.threshold_sun_zenith_deg { 1.0 } else { 0.0 };
+                let centred =
+                    |s: usize| if entry.slices[s].sun_zenith_deg <= entry.threshold_sun_zenith_deg { 1.0 } else { 0.0 };
                 params.extend([weight as f32, f as f32, i0 as f32, i1 as f32]);
                 params.extend([slice_scale(i0), slice_scale(i1), centred(i0), centred(i1)]);
             }
             None => params.extend([0.0; 8]),
         }
     }
-    let toward = crate::render::camera::direction_deg(sun_zenith_deg, weather.sun_azimuth_deg);
+    let toward = crate::directions::camera::direction_deg(sun_zenith_deg, weather.sun_azimuth_deg);
     match weather.sun_disk {
         true => {
-            let sun = luts
-                .sun(weather.sun_elevation_deg, weather.haziness, weather.cloudiness)
-                .ok_or_else(|| PreviewError::Bake("the bake has no sun (made before its transmittance file): bake it again, or leave the disk out".into()))?;
+            let sun = luts.sun(weather.sun_elevation_deg, weather.haziness, weather.cloudiness).ok_or_else(|| {
+                PreviewError::Bake(
+                    "the bake has no sun (made before its transmittance file): bake it again, or leave the disk out"
+                        .into(),
+                )
+            })?;
             let sin_radius = libm::sin(0.5 * sun.angular_diameter_deg.to_radians());
             params.extend([toward.x as f32, toward.y as f32, toward.z as f32, sin_radius as f32]);
             params.extend(sun.disk_radiance_rgb.map(|x| x as f32).into_iter().chain([1.0]));

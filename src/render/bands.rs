@@ -133,7 +133,10 @@ impl HeroSet {
 
     /// The same set with position `j` as its hero (the rotation).
     pub fn rotated(&self, j: usize) -> HeroSet {
-        HeroSet { band: std::array::from_fn(|k| self.band[(j + k) % HERO_N]), pdf: std::array::from_fn(|k| self.pdf[(j + k) % HERO_N]) }
+        HeroSet {
+            band: std::array::from_fn(|k| self.band[(j + k) % HERO_N]),
+            pdf: std::array::from_fn(|k| self.pdf[(j + k) % HERO_N]),
+        }
     }
 }
 
@@ -180,7 +183,8 @@ mod tests {
                 // real ones do); they sum to 1 over the four choices only if
                 // every choice draws the same set.
                 let density = |band: usize| 0.1 + ((band * 31) % 7) as f64;
-                let total: f64 = (0..HERO_N).map(|h| HeroSet::mis_weights(&b.hero_set_from(v, h).band.map(density))[0]).sum();
+                let total: f64 =
+                    (0..HERO_N).map(|h| HeroSet::mis_weights(&b.hero_set_from(v, h).band.map(density))[0]).sum();
                 assert!((total - 1.0).abs() < 1e-12, "n {n}, v {v}: weights sum to {total}");
             }
         }
@@ -200,7 +204,11 @@ mod tests {
                 }
                 for (band, c) in count.iter().enumerate() {
                     let f = *c as f64 / m as f64;
-                    assert!((f - b.pdf[band]).abs() < 4.0 / m as f64 + 1e-9, "n {n}, position {j}, band {band}: {f} vs {}", b.pdf[band]);
+                    assert!(
+                        (f - b.pdf[band]).abs() < 4.0 / m as f64 + 1e-9,
+                        "n {n}, position {j}, band {band}: {f} vs {}",
+                        b.pdf[band]
+                    );
                 }
             }
         }

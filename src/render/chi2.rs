@@ -148,7 +148,17 @@ fn chi2_p_value(chi2: f64, dof: usize) -> f64 {
 /// Adaptive Simpson on [a, b] with Richardson's correction (Lyness 1969),
 /// given f at a, the midpoint and b and the whole-interval estimate.
 #[allow(clippy::too_many_arguments)]
-fn simpson_adaptive(f: &dyn Fn(f64) -> f64, a: f64, b: f64, fa: f64, fm: f64, fb: f64, whole: f64, tol: f64, depth: u32) -> f64 {
+fn simpson_adaptive(
+    f: &dyn Fn(f64) -> f64,
+    a: f64,
+    b: f64,
+    fa: f64,
+    fm: f64,
+    fb: f64,
+    whole: f64,
+    tol: f64,
+    depth: u32,
+) -> f64 {
     let m = 0.5 * (a + b);
     let (lm, rm) = (0.5 * (a + m), 0.5 * (m + b));
     let (flm, frm) = (f(lm), f(rm));
@@ -158,7 +168,8 @@ fn simpson_adaptive(f: &dyn Fn(f64) -> f64, a: f64, b: f64, fa: f64, fm: f64, fb
     if depth == 0 || delta.abs() <= 15.0 * tol {
         return left + right + delta / 15.0;
     }
-    simpson_adaptive(f, a, m, fa, flm, fm, left, 0.5 * tol, depth - 1) + simpson_adaptive(f, m, b, fm, frm, fb, right, 0.5 * tol, depth - 1)
+    simpson_adaptive(f, a, m, fa, flm, fm, left, 0.5 * tol, depth - 1)
+        + simpson_adaptive(f, m, b, fm, frm, fb, right, 0.5 * tol, depth - 1)
 }
 
 /// ∫ f dμ over [a, b], split at the `kinks` (sorted) inside it, each piece
@@ -293,7 +304,14 @@ fn frame(axis: DVec3) -> (DVec3, DVec3) {
 /// Tests `sampler` against `density` (sr⁻¹, a function of μ = w · axis
 /// only, with derivative jumps at `kinks`), drawing [`N_SAMPLES`] samples,
 /// sample i from the stream `Rng::new(SEED, case, i)`.
-fn run_case(name: &str, case: u64, axis: DVec3, density: &dyn Fn(f64) -> f64, kinks: &[f64], sampler: &mut dyn FnMut(&mut Rng) -> DVec3) -> Outcome {
+fn run_case(
+    name: &str,
+    case: u64,
+    axis: DVec3,
+    density: &dyn Fn(f64) -> f64,
+    kinks: &[f64],
+    sampler: &mut dyn FnMut(&mut Rng) -> DVec3,
+) -> Outcome {
     let axis = axis.normalize();
     let (t, b) = frame(axis);
     let edges = mu_edges(density);
@@ -320,11 +338,23 @@ fn run_case(name: &str, case: u64, axis: DVec3, density: &dyn Fn(f64) -> f64, ki
     // Where the density integrates to (nearly) zero over a cell, no sample
     // may land, however few: such cells are kept out of the pool, where
     // they would only add to its count.
-    let zero_density_samples = observed.iter().zip(&expected).filter(|(_, &e)| e < ZERO_EXPECTED).map(|(&o, _)| o).sum();
-    let (obs, exp): (Vec<u64>, Vec<f64>) = observed.iter().zip(&expected).filter(|(_, &e)| e >= ZERO_EXPECTED).map(|(&o, &e)| (o, e)).unzip();
+    let zero_density_samples =
+        observed.iter().zip(&expected).filter(|(_, &e)| e < ZERO_EXPECTED).map(|(&o, _)| o).sum();
+    let (obs, exp): (Vec<u64>, Vec<f64>) =
+        observed.iter().zip(&expected).filter(|(_, &e)| e >= ZERO_EXPECTED).map(|(&o, &e)| (o, e)).unzip();
     let (chi2, cells, dof) = pearson(&obs, &exp);
     let p_value = chi2_p_value(chi2, dof);
-    Outcome { name: name.to_string(), samples: N_SAMPLES, cells, dof, chi2, p_value, normalisation_error, zero_density_samples, bad_samples }
+    Outcome {
+        name: name.to_string(),
+        samples: N_SAMPLES,
+        cells,
+        dof,
+        chi2,
+        p_value,
+        normalisation_error,
+        zero_density_samples,
+        bad_samples,
+    }
 }
 
 // ---------------------------------------------------------------------------
@@ -350,7 +380,9 @@ impl Sampler {
                 Box::new(move |mu| parts.iter().map(|(w, p)| w * p.eval(mu)).sum::<f64>() / total)
             }
             // The pdf of a direction at μ from the axis (any azimuth).
-            Sampler::CosineHemisphere => Box::new(move |mu| cosine_hemisphere_pdf(axis, axis * mu + frame(axis).0 * (1.0 - mu * mu).max(0.0).sqrt())),
+            Sampler::CosineHemisphere => Box::new(move |mu| {
+                cosine_hemisphere_pdf(axis, axis * mu + frame(axis).0 * (1.0 - mu * mu).max(0.0).sqrt())
+            }),
         }
     }
 
@@ -361,7 +393,11 @@ impl Sampler {
             Sampler::Mixture(parts) => parts.iter().map(|p| &p.1).collect(),
             Sampler::CosineHemisphere => return vec![0.0],
         };
-        let mut k: Vec<f64> = phases.iter().filter_map(|p| if let Phase::Table(t) = p { Some(t.mu.clone()) } else { None }).flatten().collect();
+        let mut k: Vec<f64> = phases
+            .iter()
+            .filter_map(|p| if let Phase::Table(t) = p { Some(t.mu.clone()) } else { None })
+            .flatten()
+            .collect();
         k.sort_by(f64::total_cmp);
         k.dedup();
         k
@@ -388,7 +424,14 @@ struct Case {
 
 /// Tilted, non-axis-aligned directions of travel (and normals).
 fn tilted(k: usize) -> DVec3 {
-    const D: [[f64; 3]; 6] = [[0.36, -0.48, 0.8], [-0.62, 0.25, -0.74], [0.11, 0.93, 0.35], [-0.45, -0.71, 0.2], [0.8, 0.1, -0.59], [-0.2, 0.55, 0.81]];
+    const D: [[f64; 3]; 6] = [
+        [0.36, -0.48, 0.8],
+        [-0.62, 0.25, -0.74],
+        [0.11, 0.93, 0.35],
+        [-0.45, -0.71, 0.2],
+        [0.8, 0.1, -0.59],
+        [-0.2, 0.55, 0.81],
+    ];
     DVec3::from_array(D[k % D.len()]).normalize()
 }
 
@@ -410,7 +453,11 @@ fn cloud_table() -> Arc<PhaseTable> {
         let grid = phase_grid_deg();
         let mus: Vec<f64> = grid.iter().map(|a| a.to_radians().cos()).collect();
         let r = bhmie(C64::new(1.333, 1.96e-9), x, &mus);
-        let p_sr_inv: Vec<f64> = r.s1.iter().zip(&r.s2).map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca)).collect();
+        let p_sr_inv: Vec<f64> =
+            r.s1.iter()
+                .zip(&r.s2)
+                .map(|(s1, s2)| 0.5 * (s1.norm_sqr() + s2.norm_sqr()) / (PI * x * x * r.q_sca))
+                .collect();
         let t = PhaseTable::new(&grid, &p_sr_inv);
         assert!((t.integral - 1.0).abs() < 1e-2, "cloud phase integral {}", t.integral);
         Arc::new(t)
@@ -436,19 +483,40 @@ fn case(name: &str, axis: DVec3, sampler: Sampler) -> Case {
 }
 
 fn rayleigh_cases() -> Vec<Case> {
-    [0.0, 0.0279, 0.1].iter().enumerate().map(|(k, &rho)| case(&format!("Rayleigh rho={rho}"), tilted(k), Sampler::Phase(Phase::Rayleigh { depolarization: rho }))).collect()
+    [0.0, 0.0279, 0.1]
+        .iter()
+        .enumerate()
+        .map(|(k, &rho)| {
+            case(&format!("Rayleigh rho={rho}"), tilted(k), Sampler::Phase(Phase::Rayleigh { depolarization: rho }))
+        })
+        .collect()
 }
 
 fn cornette_shanks_cases() -> Vec<Case> {
-    [0.2, 0.76, -0.3].iter().enumerate().map(|(k, &g)| case(&format!("Cornette-Shanks g={g}"), tilted(k + 1), Sampler::Phase(Phase::CornetteShanks { g }))).collect()
+    [0.2, 0.76, -0.3]
+        .iter()
+        .enumerate()
+        .map(|(k, &g)| {
+            case(&format!("Cornette-Shanks g={g}"), tilted(k + 1), Sampler::Phase(Phase::CornetteShanks { g }))
+        })
+        .collect()
 }
 
 fn henyey_greenstein_cases() -> Vec<Case> {
-    [0.0, 0.5, 0.85, -0.6, 0.95].iter().enumerate().map(|(k, &g)| case(&format!("Henyey-Greenstein g={g}"), tilted(k + 2), Sampler::Phase(Phase::HenyeyGreenstein { g }))).collect()
+    [0.0, 0.5, 0.85, -0.6, 0.95]
+        .iter()
+        .enumerate()
+        .map(|(k, &g)| {
+            case(&format!("Henyey-Greenstein g={g}"), tilted(k + 2), Sampler::Phase(Phase::HenyeyGreenstein { g }))
+        })
+        .collect()
 }
 
 fn mie_cases() -> Vec<Case> {
-    vec![case("Mie table, cloud droplet 5 um", tilted(3), Sampler::Phase(Phase::Table(cloud_table()))), case("Mie table, haze mode", tilted(4), Sampler::Phase(Phase::Table(haze_table())))]
+    vec![
+        case("Mie table, cloud droplet 5 um", tilted(3), Sampler::Phase(Phase::Table(cloud_table()))),
+        case("Mie table, haze mode", tilted(4), Sampler::Phase(Phase::Table(haze_table()))),
+    ]
 }
 
 fn lobe_cases() -> Vec<Case> {
@@ -463,17 +531,29 @@ fn lobe_cases() -> Vec<Case> {
 fn mixture_cases() -> Vec<Case> {
     let rayleigh = Phase::Rayleigh { depolarization: 0.0279 };
     vec![
-        case("mixture 0.3 Rayleigh + 0.7 haze", tilted(5), Sampler::Mixture(vec![(0.3, rayleigh.clone()), (0.7, Phase::Table(haze_table()))])),
+        case(
+            "mixture 0.3 Rayleigh + 0.7 haze",
+            tilted(5),
+            Sampler::Mixture(vec![(0.3, rayleigh.clone()), (0.7, Phase::Table(haze_table()))]),
+        ),
         case(
             "mixture 0.2 Rayl + 0 cloud + 0.8 haze",
             tilted(0),
-            Sampler::Mixture(vec![(0.2, rayleigh), (0.0, Phase::Table(cloud_table())), (0.8, Phase::Table(haze_table())), (0.0, Phase::HenyeyGreenstein { g: -0.9 })]),
+            Sampler::Mixture(vec![
+                (0.2, rayleigh),
+                (0.0, Phase::Table(cloud_table())),
+                (0.8, Phase::Table(haze_table())),
+                (0.0, Phase::HenyeyGreenstein { g: -0.9 }),
+            ]),
         ),
     ]
 }
 
 fn cosine_hemisphere_cases() -> Vec<Case> {
-    vec![case("cosine hemisphere, normal 1", tilted(1), Sampler::CosineHemisphere), case("cosine hemisphere, normal 2", tilted(4), Sampler::CosineHemisphere)]
+    vec![
+        case("cosine hemisphere, normal 1", tilted(1), Sampler::CosineHemisphere),
+        case("cosine hemisphere, normal 2", tilted(4), Sampler::CosineHemisphere),
+    ]
 }
 
 /// Runs a list of cases (case ids from `first_id`), prints every outcome,
@@ -485,14 +565,21 @@ fn check_cases(cases: &[Case], first_id: u64) {
         .enumerate()
         .map(|(k, c)| {
             let density = c.sampler.density(c.axis);
-            run_case(&c.name, first_id + k as u64, c.axis, &*density, &c.sampler.kinks(), &mut |rng| c.sampler.sample(c.axis, rng))
+            run_case(&c.name, first_id + k as u64, c.axis, &*density, &c.sampler.kinks(), &mut |rng| {
+                c.sampler.sample(c.axis, rng)
+            })
         })
         .collect();
     for o in &outcomes {
         o.print(alpha);
     }
     for o in &outcomes {
-        assert!(o.normalisation_error < 1e-4, "{}: the density integrates to 1 ± {:.2e}", o.name, o.normalisation_error);
+        assert!(
+            o.normalisation_error < 1e-4,
+            "{}: the density integrates to 1 ± {:.2e}",
+            o.name,
+            o.normalisation_error
+        );
         assert!(
             !o.rejected(alpha),
             "{}: χ² = {:.2} with {} dof, p = {:.3e} < α = {alpha:.3e} (zero-density samples {}, bad {})",
@@ -508,9 +595,18 @@ fn check_cases(cases: &[Case], first_id: u64) {
 
 #[test]
 fn the_family_has_n_cases() {
-    let n = rayleigh_cases().len() + cornette_shanks_cases().len() + henyey_greenstein_cases().len() + mie_cases().len() + lobe_cases().len() + mixture_cases().len() + cosine_hemisphere_cases().len();
+    let n = rayleigh_cases().len()
+        + cornette_shanks_cases().len()
+        + henyey_greenstein_cases().len()
+        + mie_cases().len()
+        + lobe_cases().len()
+        + mixture_cases().len()
+        + cosine_hemisphere_cases().len();
     assert_eq!(n, N_CASES, "update N_CASES (the Šidák correction) when adding cases");
-    println!("chi2 family: {N_CASES} cases, family-wise alpha {ALPHA_FAMILY}, Sidak per-case alpha {:.4e}", alpha_per_case());
+    println!(
+        "chi2 family: {N_CASES} cases, family-wise alpha {ALPHA_FAMILY}, Sidak per-case alpha {:.4e}",
+        alpha_per_case()
+    );
 }
 
 #[test]
@@ -556,7 +652,13 @@ fn henyey_greenstein_phase_sampling() {
 #[test]
 fn mie_table_phase_sampling() {
     for (name, t) in [("cloud droplet", cloud_table()), ("haze mode", haze_table())] {
-        println!("chi2 table {name}: input integral {:.5}, g {:.4}, p(0 deg) {:.4e} sr^-1, p(180 deg) {:.4e} sr^-1", t.integral, t.mean_cosine(), t.eval_mu(1.0), t.eval_mu(-1.0));
+        println!(
+            "chi2 table {name}: input integral {:.5}, g {:.4}, p(0 deg) {:.4e} sr^-1, p(180 deg) {:.4e} sr^-1",
+            t.integral,
+            t.mean_cosine(),
+            t.eval_mu(1.0),
+            t.eval_mu(-1.0)
+        );
     }
     check_cases(&mie_cases(), 400);
 }
@@ -590,10 +692,19 @@ fn wrong_samplers_are_rejected() {
     let mut outcomes = Vec::new();
     for (k, g) in [0.5, 0.85].into_iter().enumerate() {
         let target = Phase::HenyeyGreenstein { g };
-        outcomes.push(run_case(&format!("WRONG: HG g+0.02 against g={g}"), 900 + k as u64, d, &|mu| target.eval(mu), &[], &mut |rng| sample_phase(&hg(g + 0.02), d, rng)));
+        outcomes.push(run_case(
+            &format!("WRONG: HG g+0.02 against g={g}"),
+            900 + k as u64,
+            d,
+            &|mu| target.eval(mu),
+            &[],
+            &mut |rng| sample_phase(&hg(g + 0.02), d, rng),
+        ));
     }
     let target = rayleigh(0.1);
-    outcomes.push(run_case("WRONG: Rayleigh rho=0 against rho=0.1", 910, d, &|mu| target.eval(mu), &[], &mut |rng| sample_phase(&rayleigh(0.0), d, rng)));
+    outcomes.push(run_case("WRONG: Rayleigh rho=0 against rho=0.1", 910, d, &|mu| target.eval(mu), &[], &mut |rng| {
+        sample_phase(&rayleigh(0.0), d, rng)
+    }));
     outcomes.push(run_case("WRONG: cosine hemisphere with mu = u", 920, d, &*cosine_density, &[0.0], &mut |rng| {
         let mu = rng.uniform();
         around(d, mu, 2.0 * PI * rng.uniform())
@@ -602,10 +713,17 @@ fn wrong_samplers_are_rejected() {
         let mu = sample_hg(0.5, rng.uniform());
         around(d, mu, PI * rng.uniform())
     }));
-    outcomes.push(run_case("WRONG: uniform sphere against the cosine lobe", 950, d, &*cosine_density, &[0.0], &mut |rng| {
-        let mu = 2.0 * rng.uniform() - 1.0;
-        around(d, mu, 2.0 * PI * rng.uniform())
-    }));
+    outcomes.push(run_case(
+        "WRONG: uniform sphere against the cosine lobe",
+        950,
+        d,
+        &*cosine_density,
+        &[0.0],
+        &mut |rng| {
+            let mu = 2.0 * rng.uniform() - 1.0;
+            around(d, mu, 2.0 * PI * rng.uniform())
+        },
+    ));
     // A table sampler that returns the nearest table cosine above its μ
     // instead of interpolating (a lattice of directions). A subtler error,
     // inverting the CDF as if the density were constant within each table
@@ -613,17 +731,31 @@ fn wrong_samplers_are_rejected() {
     // narrower than any bin (tried: p ≈ 0.95 for both tables).
     let cloud = cloud_table();
     let cloud_phase = Phase::Table(cloud.clone());
-    outcomes.push(run_case("WRONG: cloud table snapped to its knots", 960, d, &|mu| cloud_phase.eval(mu), &cloud.mu, &mut |rng| {
-        let mu = cloud.sample_mu(rng.uniform());
-        let i = cloud.mu.partition_point(|&m| m < mu).min(cloud.mu.len() - 1);
-        around(d, cloud.mu[i], 2.0 * PI * rng.uniform())
-    }));
+    outcomes.push(run_case(
+        "WRONG: cloud table snapped to its knots",
+        960,
+        d,
+        &|mu| cloud_phase.eval(mu),
+        &cloud.mu,
+        &mut |rng| {
+            let mu = cloud.sample_mu(rng.uniform());
+            let i = cloud.mu.partition_point(|&m| m < mu).min(cloud.mu.len() - 1);
+            around(d, cloud.mu[i], 2.0 * PI * rng.uniform())
+        },
+    ));
     let mix_density = mix.density(d);
     let Sampler::Mixture(parts) = &mix else { unreachable!() };
-    outcomes.push(run_case("WRONG: mixture picked 0.4/0.6, not 0.3/0.7", 940, d, &*mix_density, &mix.kinks(), &mut |rng| {
-        let i = pick_weighted(rng.uniform(), 2, |i| [0.4, 0.6][i]);
-        sample_phase(&parts[i].1, d, rng)
-    }));
+    outcomes.push(run_case(
+        "WRONG: mixture picked 0.4/0.6, not 0.3/0.7",
+        940,
+        d,
+        &*mix_density,
+        &mix.kinks(),
+        &mut |rng| {
+            let i = pick_weighted(rng.uniform(), 2, |i| [0.4, 0.6][i]);
+            sample_phase(&parts[i].1, d, rng)
+        },
+    ));
     for o in &outcomes {
         o.print(alpha);
     }
@@ -632,6 +764,13 @@ fn wrong_samplers_are_rejected() {
     assert!(outcomes.iter().any(|o| o.name.contains("uniform sphere") && o.zero_density_samples > 0));
     for o in &outcomes {
         assert!(o.normalisation_error < 1e-4, "{}: normalisation {:.2e}", o.name, o.normalisation_error);
-        assert!(o.rejected(alpha), "{}: a wrong sampler passed, χ² = {:.2} with {} dof, p = {:.3e} ≥ α = {alpha:.3e}", o.name, o.chi2, o.dof, o.p_value);
+        assert!(
+            o.rejected(alpha),
+            "{}: a wrong sampler passed, χ² = {:.2} with {} dof, p = {:.3e} ≥ α = {alpha:.3e}",
+            o.name,
+            o.chi2,
+            o.dof,
+            o.p_value
+        );
     }
 }

@@ -118,7 +118,15 @@ mod tests {
                 // Gaussian noise by Box–Muller.
                 let g = (-2.0 * (1.0 - rng.uniform()).ln()).sqrt() * (2.0 * std::f64::consts::PI * rng.uniform()).cos();
                 let v = t + se * g;
-                pixels.push(PixelResult { xyz: [v; 3], xyz_direct: [0.0; 3], xyz_stderr: [se; 3], spectral: vec![], spectral_stderr: vec![], samples: 1, paths_cut: 0 });
+                pixels.push(PixelResult {
+                    xyz: [v; 3],
+                    xyz_direct: [0.0; 3],
+                    xyz_stderr: [se; 3],
+                    spectral: vec![],
+                    spectral_stderr: vec![],
+                    samples: 1,
+                    paths_cut: 0,
+                });
             }
         }
         (Image { width: w, height: h, pixels }, truth)

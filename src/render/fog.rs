@@ -62,7 +62,9 @@ impl Fog {
             return Err(format!("the fog's object distance must be positive (got {} km)", self.max_distance_km));
         }
         match self.ceiling_km {
-            Some(c) if !(c > altitude_km) => Err(format!("the fog's ceiling ({c} km) must be above the observer ({altitude_km} km)")),
+            Some(c) if !(c > altitude_km) => {
+                Err(format!("the fog's ceiling ({c} km) must be above the observer ({altitude_km} km)"))
+            }
             _ => Ok(()),
         }
     }
@@ -72,7 +74,8 @@ impl Fog {
     /// rises through the ceiling, whichever is nearer (the ground, where
     /// the ray meets it first, ends the ray in any case).
     pub fn reach_km(&self, medium: &Medium, p: DVec3, d: DVec3) -> f64 {
-        let through_ceiling = self.ceiling_km.and_then(|c| medium.distance_to_altitude(p, d, c, true)).unwrap_or(f64::INFINITY);
+        let through_ceiling =
+            self.ceiling_km.and_then(|c| medium.distance_to_altitude(p, d, c, true)).unwrap_or(f64::INFINITY);
         self.max_distance_km.min(through_ceiling)
     }
 }

@@ -94,7 +94,13 @@ impl RayGuide {
     /// every lit point: the Earth's shadow is convex, so a bin whose two
     /// edges are in shadow is in shadow all along. None when nothing on the
     /// ray is lit. Allocation-free: `scratch` keeps the phase values.
-    pub(crate) fn sample_secondary(tracers: &[&Tracer], origin: DVec3, dir: DVec3, scratch: &mut SecondaryScratch, rng: &mut Rng) -> Option<(f64, f64)> {
+    pub(crate) fn sample_secondary(
+        tracers: &[&Tracer],
+        origin: DVec3,
+        dir: DVec3,
+        scratch: &mut SecondaryScratch,
+        rng: &mut Rng,
+    ) -> Option<(f64, f64)> {
         let first = tracers.first()?;
         let end_km = first.medium.ray_end(origin, dir)?;
         if !(end_km > 0.0) {
@@ -151,7 +157,10 @@ impl RayGuide {
         let mut phases = Vec::new();
         phases_to_sun_into(tracers, dir, &mut phases);
         let components = tracers.first().map_or(0, |t| t.spectral.extinction.len());
-        let values: Vec<f64> = edges.windows(2).map(|w| single_scattering(tracers, &phases, components, origin, dir, 0.5 * (w[0] + w[1]))).collect();
+        let values: Vec<f64> = edges
+            .windows(2)
+            .map(|w| single_scattering(tracers, &phases, components, origin, dir, 0.5 * (w[0] + w[1])))
+            .collect();
         Self::from_bins(edges, &values)
     }
 
@@ -204,7 +213,14 @@ pub(crate) fn phases_to_sun_into(tracers: &[&Tracer], dir: DVec3, out: &mut Vec<
 /// need a column table; 0 without one), with their `phases` toward the sun
 /// (see [`phases_to_sun_into`], `components` per tracer). The column paths
 /// are shared by the bands.
-pub(crate) fn single_scattering(tracers: &[&Tracer], phases: &[f64], components: usize, origin: DVec3, dir: DVec3, t_km: f64) -> f64 {
+pub(crate) fn single_scattering(
+    tracers: &[&Tracer],
+    phases: &[f64],
+    components: usize,
+    origin: DVec3,
+    dir: DVec3,
+    t_km: f64,
+) -> f64 {
     let Some(first) = tracers.first() else { return 0.0 };
     let Some(columns) = first.columns else { return 0.0 };
     let medium = first.medium;

@@ -13,9 +13,18 @@ pub type Metadata = Vec<(String, String)>;
 /// With `noisy`, X, Y, Z are the denoised values and the image before
 /// denoising is kept in `noisy.X`, `noisy.Y`, `noisy.Z`. Without `xyz`
 /// (a render of spectral lines only) there are no X, Y, Z channels.
-pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, xyz: bool, spectral_nm: &[f64], metadata: &Metadata) -> std::io::Result<()> {
+pub fn write_exr(
+    path: &Path,
+    img: &Image,
+    noisy: Option<&Image>,
+    xyz: bool,
+    spectral_nm: &[f64],
+    metadata: &Metadata,
+) -> std::io::Result<()> {
     let (w, h) = (img.width, img.height);
-    let chan = |name: String, f: &dyn Fn(&super::PixelResult) -> f64| AnyChannel::new(name.as_str(), FlatSamples::F32(img.pixels.iter().map(|p| f(p) as f32).collect()));
+    let chan = |name: String, f: &dyn Fn(&super::PixelResult) -> f64| {
+        AnyChannel::new(name.as_str(), FlatSamples::F32(img.pixels.iter().map(|p| f(p) as f32).collect()))
+    };
     let mut list: Vec<AnyChannel<FlatSamples>> = Vec::new();
     for (c, name) in ["X", "Y", "Z"].iter().enumerate().filter(|_| xyz) {
         list.push(chan(name.to_string(), &move |p| p.xyz[c]));
@@ -24,7 +33,10 @@ pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, xyz: bool, spe
     list.push(chan("samples".to_string(), &|p| p.samples as f64));
     if let Some(raw) = noisy {
         for (c, name) in ["X", "Y", "Z"].iter().enumerate() {
-            list.push(AnyChannel::new(format!("noisy.{name}").as_str(), FlatSamples::F32(raw.pixels.iter().map(|p| p.xyz[c] as f32).collect())));
+            list.push(AnyChannel::new(
+                format!("noisy.{name}").as_str(),
+                FlatSamples::F32(raw.pixels.iter().map(|p| p.xyz[c] as f32).collect()),
+            ));
         }
     }
     for (j, l) in spectral_nm.iter().enumerate() {
@@ -35,7 +47,8 @@ pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, xyz: bool, spe
     // header's other attributes live in a hash map whose order varies from
     // run to run, and renders must be byte-identical.
     let mut attrs = LayerAttributes::named("sky");
-    let sorted: std::collections::BTreeMap<&str, &str> = metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
+    let sorted: std::collections::BTreeMap<&str, &str> =
+        metadata.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
     let json = serde_json::to_string(&sorted).expect("serialisable");
     attrs.other.insert(Text::from("sky.metadata"), AttributeValue::Text(Text::from(json.as_str())));
     let layer = Layer::new((w, h), attrs, Encoding::FAST_LOSSLESS, AnyChannels::sort(SmallVec::from_vec(list)));
@@ -50,8 +63,9 @@ pub fn write_exr(path: &Path, img: &Image, noisy: Option<&Image>, xyz: bool, spe
 
 /// XYZ → linear sRGB (IEC 61966-2-1, D65; the matrix colour-science uses).
 pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
-    let [x, y, z] = xyz;
-    [3.2404542 * x - 1.5371385 * y - 0.4985314 * z, -0.9692660 * x + 1.8760108 * y + 0.0415560 * z, 0.0556434 * x - 0.2040259 * y + 1.0572252 * z]
+    const XYZ_TO_SRGB: crate::colour::Mat3 =
+        [[3.2404542, -1.5371385, -0.4985314], [-0.9692660, 1.8760108, 0.0415560], [0.0556434, -0.2040259, 1.0572252]];
+    crate::colour::apply(&XYZ_TO_SRGB, xyz)
 }
 
 fn srgb_oetf(v: f64) -> f64 {
@@ -103,9 +117,11 @@ pub fn write_png_scaled(path: &Path, img: &Image, scale: f64, white_xyz: Option<
             buf.push((srgb_oetf(v / (1.0 + v)) * 255.0 + 0.5) as u8);
         }
     }
-    let im = image::RgbImage::from_raw(img.width as u32, img.height as u32, buf).ok_or_else(|| std::io::Error::other("image size"))?;
+    let im = image::RgbImage::from_raw(img.width as u32, img.height as u32, buf)
+        .ok_or_else(|| std::io::Error::other("image size"))?;
     let mut png = Vec::new();
-    im.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map_err(|e| std::io::Error::other(e.to_string()))?;
+    im.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
     crate::mie::cache::write_atomic(path, &png)
 }
 

@@ -20,7 +20,8 @@ pub struct Rng {
 
 impl Rng {
     pub fn new(seed: u64, pixel: u64, sample: u64) -> Rng {
-        let s = mix(mix(mix(seed ^ 0x5EED_5EED_5EED_5EED).wrapping_add(pixel)).wrapping_add(sample.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+        let s = mix(mix(mix(seed ^ 0x5EED_5EED_5EED_5EED).wrapping_add(pixel))
+            .wrapping_add(sample.wrapping_mul(0x9E37_79B9_7F4A_7C15)));
         Rng { state: s }
     }
 

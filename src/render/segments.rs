@@ -284,7 +284,13 @@ impl Medium {
     /// into `out` (a reused buffer), and the distance to the ground if the
     /// ray meets it. A ray parallel to a plane-parallel atmosphere's layers
     /// (a set of measure zero) gets no segments.
-    pub(crate) fn majorant_segments(&self, p: DVec3, d: DVec3, majorant: &[f64], out: &mut Vec<MajorantSegment>) -> Option<f64> {
+    pub(crate) fn majorant_segments(
+        &self,
+        p: DVec3,
+        d: DVec3,
+        majorant: &[f64],
+        out: &mut Vec<MajorantSegment>,
+    ) -> Option<f64> {
         out.clear();
         for s in self.walk(p, d) {
             if !s.end_km.is_finite() {

@@ -67,7 +67,13 @@ pub struct SingleScattering<'a> {
 impl<'a> SingleScattering<'a> {
     /// For the observer at `altitude_km` above the origin of the horizontal
     /// plane and the sun toward `sun` (world frame, z up).
-    pub fn new(medium: &'a Medium, columns: &'a ColumnTable, optics: &'a [Spectral], sun: DVec3, altitude_km: f64) -> SingleScattering<'a> {
+    pub fn new(
+        medium: &'a Medium,
+        columns: &'a ColumnTable,
+        optics: &'a [Spectral],
+        sun: DVec3,
+        altitude_km: f64,
+    ) -> SingleScattering<'a> {
         SingleScattering { medium, columns, optics, sun: sun.normalize(), origin: medium.observer(altitude_km) }
     }
 
@@ -103,7 +109,10 @@ impl<'a> SingleScattering<'a> {
         for (i, rho) in density.iter_mut().enumerate() {
             *rho = self.medium.density(i, z_km);
         }
-        self.optics.iter().map(|sp| sp.extinction.iter().zip(density.iter()).map(|(e, rho)| e * rho).sum::<f64>()).fold(0.0, f64::max)
+        self.optics
+            .iter()
+            .map(|sp| sp.extinction.iter().zip(density.iter()).map(|(e, rho)| e * rho).sum::<f64>())
+            .fold(0.0, f64::max)
     }
 
     /// L₁ toward the observer from direction `dir` (pointing away from
@@ -146,7 +155,9 @@ impl<'a> SingleScattering<'a> {
         let n = self.optics.len();
         let mut out = vec![0.0; n];
         let ground = m.distance_to_altitude(self.origin, d, 0.0, false).filter(|&t| t < max_distance_km);
-        let Some(end) = ground.or_else(|| m.distance_to_altitude(self.origin, d, m.top_km, true).map(|t| t.min(max_distance_km))) else {
+        let Some(end) =
+            ground.or_else(|| m.distance_to_altitude(self.origin, d, m.top_km, true).map(|t| t.min(max_distance_km)))
+        else {
             return March { radiance: out, transmittance: vec![1.0; n] };
         };
         // Steps end at the profiles' kinks and at the ceiling (in
@@ -154,7 +165,8 @@ impl<'a> SingleScattering<'a> {
         let mut kinks: Vec<f64> = m.kinks_km.iter().copied().chain(ceiling_km).collect();
         kinks.sort_by(f64::total_cmp);
         let mu_scatter = d.dot(self.sun);
-        let phases: Vec<Vec<f64>> = self.optics.iter().map(|sp| sp.phase.iter().map(|p| p.eval(mu_scatter)).collect()).collect();
+        let phases: Vec<Vec<f64>> =
+            self.optics.iter().map(|sp| sp.phase.iter().map(|p| p.eval(mu_scatter)).collect()).collect();
         // The view's transmittance to the current step, a running product
         // of each step's e^(−σ_t ds) (which the step's expm1 gives).
         let mut t_view = vec![1.0; n];
@@ -256,8 +268,8 @@ fn xyz_of(weight: &[[f64; 3]], l: &[f64]) -> [f64; 3] {
 mod tests {
     use super::*;
     use crate::atmosphere::Atmosphere;
+    use crate::directions::camera::direction_deg;
     use crate::mie::MieCache;
-    use crate::render::camera::direction_deg;
     use crate::render::{SpectralSettings, WavelengthSampling};
 
     /// The plane-parallel pure-Rayleigh slab (exponential, 8 km scale
@@ -275,7 +287,12 @@ mod tests {
         if spherical {
             atm.planet.geometry = crate::atmosphere::Geometry::Spherical;
         }
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![l], xyz: false };
+        let spectral = SpectralSettings {
+            band_nm: 40.0,
+            wavelength_sampling: WavelengthSampling::Hero,
+            spectral_nm: vec![l],
+            xyz: false,
+        };
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
         let sun = direction_deg(sun_zenith_deg, 0.0);
         let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
@@ -309,7 +326,12 @@ mod tests {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh.toml")).unwrap();
         let l = 550.0;
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![l], xyz: false };
+        let spectral = SpectralSettings {
+            band_nm: 40.0,
+            wavelength_sampling: WavelengthSampling::Hero,
+            spectral_nm: vec![l],
+            xyz: false,
+        };
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
         let sun_zenith_deg = 70.0;
         let sun = direction_deg(sun_zenith_deg, 0.0);
@@ -333,7 +355,8 @@ mod tests {
                     .map(|k| {
                         let s = (k as f64 + 0.5) * ds;
                         let z = z0 + s * mu;
-                        let tau_view = if mu.abs() < 1e-12 { sigma0 * (-z0 / h).exp() * s } else { col(z0, z) / mu.abs() };
+                        let tau_view =
+                            if mu.abs() < 1e-12 { sigma0 * (-z0 / h).exp() * s } else { col(z0, z) / mu.abs() };
                         let tau_sun = col(z, top) / mu0;
                         sigma0 * (-z / h).exp() * p * (-tau_view).exp() * (-tau_sun).exp() * e * ds
                     })
@@ -376,11 +399,17 @@ mod tests {
         let mut compared = 0;
         for name in ["clear", "cloudy1"] {
             let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
-            let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+            let spectral = SpectralSettings {
+                band_nm: 40.0,
+                wavelength_sampling: WavelengthSampling::Hero,
+                spectral_nm: vec![550.0],
+                xyz: false,
+            };
             let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
             let (m, e) = (&scene.medium, &scene.line_optics[0].extinction);
             let sun = direction_deg(40.0, 0.0);
-            let column = |p: DVec3, d: DVec3| scene.columns.optical_depth(m.altitude(p).clamp(0.0, m.top_km), m.up(p).dot(d), e);
+            let column =
+                |p: DVec3, d: DVec3| scene.columns.optical_depth(m.altitude(p).clamp(0.0, m.top_km), m.up(p).dot(d), e);
             for altitude_km in [0.0, 1.0] {
                 let ss = SingleScattering::new(m, &scene.columns, &scene.line_optics, sun, altitude_km);
                 let o = m.observer(altitude_km);
@@ -394,7 +423,11 @@ mod tests {
                     for dist in [0.5, 5.0, 40.0, 300.0] {
                         let reach = ground.or(top).unwrap().min(dist);
                         let x = o + d * reach;
-                        let (far, near) = if elevation >= 0.0 { (column(o, d), column(x, d)) } else { (column(x, -d), column(o, -d)) };
+                        let (far, near) = if elevation >= 0.0 {
+                            (column(o, d), column(x, d))
+                        } else {
+                            (column(x, -d), column(o, -d))
+                        };
                         let want = far - near;
                         // The table holds each column to about 1e-3 of
                         // itself: a short difference of two long columns
@@ -402,7 +435,10 @@ mod tests {
                         let bound = 2e-3 * want + 1e-3 * (far + near) + 1e-5;
                         let t = ss.transmittance_to(d, dist, None)[0];
                         if want > 38.0 {
-                            assert!(t < 1e-15, "{name} from {altitude_km} km, {elevation} deg, {dist} km: {t:e} through {want:.1}");
+                            assert!(
+                                t < 1e-15,
+                                "{name} from {altitude_km} km, {elevation} deg, {dist} km: {t:e} through {want:.1}"
+                            );
                             continue;
                         }
                         let ours = -t.ln();
@@ -415,15 +451,22 @@ mod tests {
                     let d = direction_deg(120.0, 0.0);
                     let reach = m.distance_to_altitude(o, d, 0.0, false).unwrap();
                     assert!((reach - 2.0).abs() < 0.01, "the ground {reach} km away");
-                    let (to_ground, beyond) = (ss.transmittance_to(d, reach, None)[0], ss.transmittance_to(d, 1000.0, None)[0]);
-                    assert!((beyond / to_ground - 1.0).abs() < 1e-6, "{name}: beyond the ground {beyond:e}, to it {to_ground:e}");
+                    let (to_ground, beyond) =
+                        (ss.transmittance_to(d, reach, None)[0], ss.transmittance_to(d, 1000.0, None)[0]);
+                    assert!(
+                        (beyond / to_ground - 1.0).abs() < 1e-6,
+                        "{name}: beyond the ground {beyond:e}, to it {to_ground:e}"
+                    );
                 }
             }
             let ss = SingleScattering::new(m, &scene.columns, &scene.line_optics, sun, 0.0);
             let d = direction_deg(60.0, 0.0);
             let reach = m.distance_to_altitude(m.observer(0.0), d, 1.0, true).unwrap();
             let (under, short) = (ss.transmittance_to(d, 1000.0, Some(1.0))[0], ss.transmittance_to(d, reach, None)[0]);
-            assert!((under.ln() / short.ln() - 1.0).abs() < 2e-3, "{name}: under a 1 km ceiling {under:e}, to 2 km {short:e}");
+            assert!(
+                (under.ln() / short.ln() - 1.0).abs() < 2e-3,
+                "{name}: under a 1 km ceiling {under:e}, to 2 km {short:e}"
+            );
             assert!(ss.transmittance_to(d, 1000.0, None)[0] < under);
         }
         assert!(compared >= 40, "only {compared} comparisons");
@@ -492,11 +535,21 @@ mod tests {
         let (mut z_sum, mut n, mut worst_power) = (0.0, 0, 0.0f64);
         for (name, sun_zenith_deg, dirs) in cases {
             let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
-            let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+            let spectral = SpectralSettings {
+                band_nm: 40.0,
+                wavelength_sampling: WavelengthSampling::Hero,
+                spectral_nm: vec![550.0],
+                xyz: false,
+            };
             let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
             let sun = direction_deg(sun_zenith_deg, 0.0);
             let sp = &scene.line_optics[0];
-            let make = |skip: bool| Tracer::new(&scene.medium, sp, sun, 0.533, Estimator::Full).with_sun_disk(false).with_columns(&scene.columns).with_single_skipped(skip);
+            let make = |skip: bool| {
+                Tracer::new(&scene.medium, sp, sun, 0.533, Estimator::Full)
+                    .with_sun_disk(false)
+                    .with_columns(&scene.columns)
+                    .with_single_skipped(skip)
+            };
             let (full, rest) = (make(false), make(true));
             let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
             let origin = full.observer(0.0);
@@ -506,8 +559,12 @@ mod tests {
                 let guide = RayGuide::build(&full, origin, d);
                 let (mut m1, mut m2, mut total) = (0.0, 0.0, 0.0);
                 for k in 0..samples {
-                    let a = Kernel::single(&full).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k)).scattered[0];
-                    let b = Kernel::single(&rest).radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k)).scattered[0];
+                    let a = Kernel::single(&full)
+                        .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k))
+                        .scattered[0];
+                    let b = Kernel::single(&rest)
+                        .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(7, j as u64, k))
+                        .scattered[0];
                     let diff = a - b;
                     m1 += diff;
                     m2 += diff * diff;

@@ -78,7 +78,10 @@ impl SkylightGuide {
                     let Some(end) = medium.ray_end(x, w) else { continue };
                     phases_to_sun_into(&[tracer], w, &mut phases);
                     let dt = end / STEPS as f64;
-                    values[i_mu * N_PHI + i_phi] = (0..STEPS).map(|j| single_scattering(&[tracer], &phases, components, x, w, (j as f64 + 0.5) * dt)).sum::<f64>() * dt;
+                    values[i_mu * N_PHI + i_phi] = (0..STEPS)
+                        .map(|j| single_scattering(&[tracer], &phases, components, x, w, (j as f64 + 0.5) * dt))
+                        .sum::<f64>()
+                        * dt;
                 }
             }
             let mean = values.iter().sum::<f64>() / values.len() as f64;
@@ -154,8 +157,8 @@ fn frame(up: DVec3, sun: DVec3) -> (DVec3, DVec3, DVec3) {
 mod tests {
     use super::*;
     use crate::atmosphere::Atmosphere;
+    use crate::directions::camera::direction_deg;
     use crate::mie::MieCache;
-    use crate::render::camera::direction_deg;
     use crate::render::tracer::Estimator;
     use crate::render::{Scene, SpectralSettings, WavelengthSampling};
 
@@ -165,9 +168,15 @@ mod tests {
     fn the_guide_is_a_density_and_its_sampler_agrees() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let atm = Atmosphere::load(&root.join("atmospheres/clear.toml")).unwrap();
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+        let spectral = SpectralSettings {
+            band_nm: 40.0,
+            wavelength_sampling: WavelengthSampling::Hero,
+            spectral_nm: vec![550.0],
+            xyz: false,
+        };
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
-        let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(96.0, 30.0), 0.533, Estimator::Full).with_columns(&scene.columns);
+        let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(96.0, 30.0), 0.533, Estimator::Full)
+            .with_columns(&scene.columns);
         let g = SkylightGuide::build(&t).expect("a twilight guide");
         let up = DVec3::new(0.3, -0.2, 1.0).normalize();
         for z in [0.5, 12.0, 80.0] {
@@ -195,7 +204,14 @@ mod tests {
         }
         // A sun higher than 2° below the horizon needs no guide.
         for sun_zenith_deg in [60.0, 91.0] {
-            let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full).with_columns(&scene.columns);
+            let t = Tracer::new(
+                &scene.medium,
+                &scene.line_optics[0],
+                direction_deg(sun_zenith_deg, 0.0),
+                0.533,
+                Estimator::Full,
+            )
+            .with_columns(&scene.columns);
             assert!(SkylightGuide::build(&t).is_none());
         }
     }
@@ -204,14 +220,22 @@ mod tests {
     fn line_scene(name: &str) -> Scene {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let atm = Atmosphere::load(&root.join(format!("atmospheres/{name}.toml"))).unwrap();
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![550.0], xyz: false };
+        let spectral = SpectralSettings {
+            band_nm: 40.0,
+            wavelength_sampling: WavelengthSampling::Hero,
+            spectral_nm: vec![550.0],
+            xyz: false,
+        };
         Scene::new(&atm, &spectral, &MieCache::new(None), &|| {})
     }
 
     /// The line's tracer of the sky without the sun's disk and without
     /// single scattering (what the guides act on), sun at azimuth 0.
     fn sky_tracer(scene: &Scene, sun_zenith_deg: f64) -> Tracer<'_> {
-        Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full).with_sun_disk(false).with_columns(&scene.columns).with_single_skipped(true)
+        Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(sun_zenith_deg, 0.0), 0.533, Estimator::Full)
+            .with_sun_disk(false)
+            .with_columns(&scene.columns)
+            .with_single_skipped(true)
     }
 
     /// The guided skylight technique changes only the noise: at twilight
@@ -234,7 +258,10 @@ mod tests {
             let g = SkylightGuide::build(&t).unwrap();
             let origin = t.observer(0.0);
             let mut scratch = Scratch::default();
-            for (j, (vz, va)) in [(0.0, 0.0), (30.0, 180.0), (60.0, 90.0), (80.0, 0.0), (88.0, 180.0), (100.0, 45.0)].into_iter().enumerate() {
+            for (j, (vz, va)) in [(0.0, 0.0), (30.0, 180.0), (60.0, 90.0), (80.0, 0.0), (88.0, 180.0), (100.0, 45.0)]
+                .into_iter()
+                .enumerate()
+            {
                 let d = direction_deg(vz, va);
                 let guide = RayGuide::build(&t, origin, d);
                 let k = 12_000u64;
@@ -242,7 +269,9 @@ mod tests {
                     let (mut m1, mut m2) = (0.0, 0.0);
                     for i in 0..k {
                         let kernel = Kernel::single(&t).with_sky_guide(with.then_some(&g));
-                        let v = kernel.radiance(origin, d, guide.as_ref(), scratch, &mut Rng::new(11 + with as u64, j as u64, i)).scattered[0];
+                        let v = kernel
+                            .radiance(origin, d, guide.as_ref(), scratch, &mut Rng::new(11 + with as u64, j as u64, i))
+                            .scattered[0];
                         m1 += v;
                         m2 += v * v;
                     }
@@ -262,7 +291,10 @@ mod tests {
             }
         }
         assert!(z_sum.abs() < 3.0 * (n as f64).sqrt(), "aggregate: sum of z {z_sum}");
-        assert!(var_on < 0.5 * var_off, "relative variance summed over the directions: {var_off:.1} without the guide, {var_on:.1} with it");
+        assert!(
+            var_on < 0.5 * var_off,
+            "relative variance summed over the directions: {var_off:.1} without the guide, {var_on:.1} with it"
+        );
     }
 
     /// The skylight estimates are skipped inside clouds
@@ -300,9 +332,13 @@ mod tests {
                 let (mut m_a, mut m_d, mut m_d2) = (0.0, 0.0, 0.0);
                 for i in 0..k {
                     let limited = Kernel::single(&t).with_sky_guide(g.as_ref());
-                    let b = limited.radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(17, j as u64, i)).scattered[0];
+                    let b = limited
+                        .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(17, j as u64, i))
+                        .scattered[0];
                     let everywhere = Kernel::single(&t).with_sky_guide(g.as_ref()).with_skylight_everywhere();
-                    let a = everywhere.radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(17, j as u64, i)).scattered[0];
+                    let a = everywhere
+                        .radiance(origin, d, guide.as_ref(), &mut scratch, &mut Rng::new(17, j as u64, i))
+                        .scattered[0];
                     m_a += a;
                     m_d += b - a;
                     m_d2 += (b - a) * (b - a);
@@ -311,7 +347,10 @@ mod tests {
                 let se = ((m_d2 / k as f64 - diff * diff).max(0.0) / (k as f64 - 1.0)).sqrt();
                 let z = if se > 0.0 { diff / se } else { 0.0 };
                 eprintln!("{name} sun {sun_zenith_deg}, view ({vz}, {va}): everywhere {a:.4e}, limited minus everywhere {diff:+.3e} ± {se:.1e} (z = {z:+.2}, {:.1} % of the radiance)", 100.0 * se / a);
-                assert!(z.abs() < 3.5, "{name} sun {sun_zenith_deg}, view ({vz}, {va}): difference {diff:e} ± {se:e}, z = {z}");
+                assert!(
+                    z.abs() < 3.5,
+                    "{name} sun {sun_zenith_deg}, view ({vz}, {va}): difference {diff:e} ± {se:e}, z = {z}"
+                );
                 z_sum += z;
                 n += 1;
             }

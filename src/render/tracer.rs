@@ -115,7 +115,13 @@ pub const LOBE_PROBABILITY: f64 = 0.25;
 const LOBE_MIN_PEAK_SR_INV: f64 = 1.0;
 
 impl<'a> Tracer<'a> {
-    pub fn new(medium: &'a Medium, spectral: &'a Spectral, sun_dir: DVec3, sun_angular_diameter_deg: f64, estimator: Estimator) -> Tracer<'a> {
+    pub fn new(
+        medium: &'a Medium,
+        spectral: &'a Spectral,
+        sun_dir: DVec3,
+        sun_angular_diameter_deg: f64,
+        estimator: Estimator,
+    ) -> Tracer<'a> {
         let half = 0.5 * sun_angular_diameter_deg.to_radians();
         let cos_half = libm::cos(half);
         let omega = 2.0 * PI * (1.0 - cos_half);
@@ -297,7 +303,14 @@ impl<'a> Tracer<'a> {
     /// Transmittance from `p` to space along `d` by ratio tracking (0 if
     /// the ray meets the ground), with Russian roulette below 0.1.
     pub fn transmittance(&self, p: DVec3, d: DVec3, rng: &mut Rng) -> f64 {
-        self.ratio_track_n(p, d, f64::INFINITY, &self.spectral.majorant, |z| [self.spectral.sigma_t(self.medium, z)], rng)[0]
+        self.ratio_track_n(
+            p,
+            d,
+            f64::INFINITY,
+            &self.spectral.majorant,
+            |z| [self.spectral.sigma_t(self.medium, z)],
+            rng,
+        )[0]
     }
 
     /// Ratio tracking (Novák et al. 2014) of N extinction coefficients at
@@ -305,7 +318,15 @@ impl<'a> Tracer<'a> {
     /// over the first `t_max` km of the ray, or to space when `t_max` is
     /// infinite; 0 if the ground comes first. Russian roulette once the
     /// largest transmittance is below 0.1 keeps long, dark paths cheap.
-    pub(crate) fn ratio_track_n<const N: usize>(&self, p: DVec3, d: DVec3, t_max: f64, majorant: &[f64], sigma_t: impl Fn(f64) -> [f64; N], rng: &mut Rng) -> [f64; N] {
+    pub(crate) fn ratio_track_n<const N: usize>(
+        &self,
+        p: DVec3,
+        d: DVec3,
+        t_max: f64,
+        majorant: &[f64],
+        sigma_t: impl Fn(f64) -> [f64; N],
+        rng: &mut Rng,
+    ) -> [f64; N] {
         let mut tr = [1.0; N];
         for seg in self.medium.walk(p, d) {
             // A target at the boundary itself (the ground point of a flight)
@@ -360,7 +381,13 @@ impl<'a> Tracer<'a> {
     /// shapes the distance of the forced first collision (see
     /// [`RayGuide`]). A convenience for tests: renders hold a [`Scratch`]
     /// per pixel and call the kernel.
-    pub fn radiance_parts(&self, origin: DVec3, dir: DVec3, guide: Option<&RayGuide>, rng: &mut Rng) -> PathSample<f64> {
+    pub fn radiance_parts(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        guide: Option<&RayGuide>,
+        rng: &mut Rng,
+    ) -> PathSample<f64> {
         let p = Kernel::single(self).radiance(origin, dir, guide, &mut Scratch::default(), rng);
         PathSample { direct: p.direct[0], scattered: p.scattered[0], cut: p.cut }
     }

@@ -9,7 +9,15 @@ use std::sync::Mutex;
 const HEIGHT: u32 = 2;
 
 fn px(v: f64) -> PixelResult {
-    PixelResult { xyz: [v; 3], xyz_direct: [0.0; 3], xyz_stderr: [0.0; 3], spectral: vec![], spectral_stderr: vec![], samples: 4, paths_cut: 0 }
+    PixelResult {
+        xyz: [v; 3],
+        xyz_direct: [0.0; 3],
+        xyz_stderr: [0.0; 3],
+        spectral: vec![],
+        spectral_stderr: vec![],
+        samples: 4,
+        paths_cut: 0,
+    }
 }
 
 /// Columns `first..first + count` as a worker that adds `lie` renders them.
@@ -263,7 +271,9 @@ fn a_failing_worker_is_blamed_then_quarantined_and_a_column_failing_everywhere_s
     s.release(1, b.id, false);
     s.blame(1, TaskError::Failed("bang".into()), Some((b.first, b.count)));
     match &s.fatal {
-        Some(FarmError::ColumnFailed { part: 0, column: 0, workers: 2, report }) => assert!(report.contains("w0: boom 2") && report.contains("w1: bang"), "{report}"),
+        Some(FarmError::ColumnFailed { part: 0, column: 0, workers: 2, report }) => {
+            assert!(report.contains("w0: boom 2") && report.contains("w1: bang"), "{report}")
+        }
         other => panic!("{other:?}"),
     }
     assert!(is_done(&s.assign(2, t(5.0))));
@@ -279,7 +289,9 @@ fn refusals_quarantine_at_once_and_a_render_with_no_worker_left_fails() {
     s.release(1, a.id, false);
     s.blame(1, TaskError::Refused("refused the token".into()), Some((a.first, a.count)));
     match &s.fatal {
-        Some(FarmError::NoWorkers { report }) => assert!(report.contains("w0: quarantined") && report.contains("refused the token"), "{report}"),
+        Some(FarmError::NoWorkers { report }) => {
+            assert!(report.contains("w0: quarantined") && report.contains("refused the token"), "{report}")
+        }
         other => panic!("{other:?}"),
     }
     // Quarantined from the start (an earlier view): the render fails at once.
@@ -341,7 +353,12 @@ fn parts_share_one_queue_and_no_task_spans_two() {
             break;
         }
         let p = &s.parts[a.part];
-        assert!(a.start >= p.offset && a.start + a.count <= p.offset + p.width, "a task spans two parts: {} + {}", a.start, a.count);
+        assert!(
+            a.start >= p.offset && a.start + a.count <= p.offset + p.width,
+            "a task spans two parts: {} + {}",
+            a.start,
+            a.count
+        );
         assert_eq!(a.start - p.offset, a.first);
         seen.push((a.part, a.first, a.count));
         let c = cols(a.start, a.count, 0.0);
@@ -366,7 +383,8 @@ fn parts_share_one_queue_and_no_task_spans_two() {
 fn a_failed_column_is_named_in_its_part() {
     let ws = (0..2).map(|i| WState::new(format!("w{i}"), format!("h:{i}"), None)).collect();
     let opts = Options { max_column_failures: 2, ..Options::default() };
-    let mut s = Sched::new(vec![part("a", vec![Some(vec![px(0.0); HEIGHT as usize]); 3]), part("b", vec![None; 2])], ws, opts);
+    let mut s =
+        Sched::new(vec![part("a", vec![Some(vec![px(0.0); HEIGHT as usize]); 3]), part("b", vec![None; 2])], ws, opts);
     for w in 0..2 {
         let a = task(s.assign(w, t(0.0)));
         assert_eq!((a.part, a.first), (1, 0));

@@ -24,16 +24,16 @@ pub enum Camera {
     /// One "pixel" per (zenith, azimuth) pair in degrees, for validation.
     Directions(Vec<(f64, f64)>),
     /// A LUT slice: texel (u, v) through the talk's adaptive mapping
-    /// ([`crate::lut::mapping`]), turned to the sun's azimuth. Texel centres
+    /// ([`crate::directions::mapping`]), turned to the sun's azimuth. Texel centres
     /// are sampled without jitter, as a GPU's bilinear filter expects.
-    Lut { mapping: crate::lut::mapping::DirectionMapping, sun_azimuth_deg: f64 },
+    Lut { mapping: crate::directions::mapping::DirectionMapping, sun_azimuth_deg: f64 },
     /// LUT slices side by side, each `width / mappings.len()` columns of
     /// the image and each with its own sun (the mapping's sun zenith angle;
     /// the view's sun is not used): the slices of a basis sky as one farm
     /// job, so that workers go from one slice to the next without waiting
     /// for the last column of each (see [`super::View::parts`]). Column x
     /// of slice k is rendered exactly as column x of that slice alone.
-    LutStrip { mappings: Vec<crate::lut::mapping::DirectionMapping>, sun_azimuth_deg: f64 },
+    LutStrip { mappings: Vec<crate::directions::mapping::DirectionMapping>, sun_azimuth_deg: f64 },
 }
 
 impl Camera {
@@ -79,7 +79,12 @@ impl Camera {
             Camera::LutStrip { mappings, sun_azimuth_deg } => {
                 let w = width / mappings.len().max(1);
                 let k = (x as usize / w.max(1)).min(mappings.len().checked_sub(1)?);
-                Camera::Lut { mapping: mappings[k], sun_azimuth_deg: *sun_azimuth_deg }.direction(x - (k * w) as f64, y, w, height)
+                Camera::Lut { mapping: mappings[k], sun_azimuth_deg: *sun_azimuth_deg }.direction(
+                    x - (k * w) as f64,
+                    y,
+                    w,
+                    height,
+                )
             }
         }
     }
@@ -110,7 +115,7 @@ mod tests {
 
     #[test]
     fn lut_camera_turns_with_the_sun() {
-        let mapping = crate::lut::mapping::DirectionMapping::new(60.0, 87.5);
+        let mapping = crate::directions::mapping::DirectionMapping::new(60.0, 87.5);
         let cam = Camera::Lut { mapping, sun_azimuth_deg: 135.0 };
         // v = 0 is the sun itself, wherever it stands.
         let d = cam.direction(3.0, 0.0, 32, 128).unwrap();

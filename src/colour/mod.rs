@@ -46,6 +46,8 @@
 //!   University of Bradford, 1985; the matrix as in colour-science's
 //!   `CAT_BRADFORD`.
 
+pub mod error;
+
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
@@ -62,21 +64,17 @@ pub const ACES_WHITE_XY: [f64; 2] = [0.32168, 0.33767];
 pub const BRADFORD: Mat3 = [[0.8951, 0.2664, -0.1614], [-0.7502, 1.7135, 0.0367], [0.0389, -0.0685, 1.0296]];
 
 /// The colour space of a LUT's texels.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ColourSpace {
     /// Linear Rec.709 (sRGB primaries), D65.
     #[default]
-    #[value(name = "rec709")]
     Rec709,
     /// Linear Rec.2020, D65.
-    #[value(name = "rec2020")]
     Rec2020,
     /// ACEScg (AP1 primaries, ACES white), Bradford-adapted from D65.
-    #[value(name = "acescg")]
     AcesCg,
     /// CIE 1931 XYZ itself (the identity).
-    #[value(name = "xyz")]
     Xyz,
 }
 
@@ -86,7 +84,8 @@ pub enum ColourSpace {
 pub struct UnknownColourSpace(pub String);
 
 impl ColourSpace {
-    pub const ALL: [ColourSpace; 4] = [ColourSpace::Rec709, ColourSpace::Rec2020, ColourSpace::AcesCg, ColourSpace::Xyz];
+    pub const ALL: [ColourSpace; 4] =
+        [ColourSpace::Rec709, ColourSpace::Rec2020, ColourSpace::AcesCg, ColourSpace::Xyz];
 
     /// The name used on the command line and in the manifest.
     pub const fn name(self) -> &'static str {
@@ -131,7 +130,9 @@ impl ColourSpace {
     /// (the adaptation included): the one the manifest records.
     pub fn xyz_to_rgb(self) -> Mat3 {
         match self.primaries_xy().zip(self.white_xy()) {
-            Some((p, w)) => mul(&invert(&normalised_primary_matrix(p, w)).expect("primaries are independent"), &self.adaptation()),
+            Some((p, w)) => {
+                mul(&invert(&normalised_primary_matrix(p, w)).expect("primaries are independent"), &self.adaptation())
+            }
             None => IDENTITY,
         }
     }
@@ -183,7 +184,10 @@ impl fmt::Display for ColourSpace {
 impl FromStr for ColourSpace {
     type Err = UnknownColourSpace;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ColourSpace::ALL.into_iter().find(|c| c.name().eq_ignore_ascii_case(s)).ok_or_else(|| UnknownColourSpace(s.to_string()))
+        ColourSpace::ALL
+            .into_iter()
+            .find(|c| c.name().eq_ignore_ascii_case(s))
+            .ok_or_else(|| UnknownColourSpace(s.to_string()))
     }
 }
 
@@ -264,7 +268,8 @@ mod tests {
 
     fn reference() -> Value {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/reference/colour_spaces.json");
-        serde_json::from_str(&std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display())))
+            .unwrap()
     }
 
     fn mat(v: &Value) -> Mat3 {
@@ -285,7 +290,6 @@ mod tests {
             assert_eq!(c.name().parse::<ColourSpace>(), Ok(c));
             assert_eq!(c.to_string(), c.name());
             assert_eq!(serde_json::to_string(&c).unwrap(), format!("\"{}\"", c.name()));
-            assert_eq!(<ColourSpace as clap::ValueEnum>::from_str(c.name(), false), Ok(c));
         }
         assert_eq!("ACEScg".parse::<ColourSpace>(), Ok(ColourSpace::AcesCg));
         assert_eq!(ColourSpace::default(), ColourSpace::Rec709);
@@ -307,7 +311,10 @@ mod tests {
                     assert_eq!(p[i][j], s["primaries_xy"][i][j].as_f64().unwrap(), "{c} primaries");
                 }
             }
-            assert_eq!(c.white_xy().unwrap().to_vec(), s["whitepoint_xy"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>());
+            assert_eq!(
+                c.white_xy().unwrap().to_vec(),
+                s["whitepoint_xy"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect::<Vec<_>>()
+            );
             let d = max_diff(&c.xyz_to_rgb(), &mat(&s["matrix_XYZ_to_RGB_bradford_from_d65"]));
             assert!(d < 1e-12, "{c}: XYZ→RGB differs by {d:e}");
             let d = max_diff(&c.adaptation(), &mat(&s["cat_bradford_d65_to_white"]));
@@ -331,7 +338,11 @@ mod tests {
     /// difference.
     #[test]
     fn acescg_matches_the_published_matrix() {
-        let published: Mat3 = [[1.6410233797, -0.3248032942, -0.2364246952], [-0.6636628587, 1.6153315917, 0.0167563477], [0.0117218943, -0.0082844420, 0.9883948585]];
+        let published: Mat3 = [
+            [1.6410233797, -0.3248032942, -0.2364246952],
+            [-0.6636628587, 1.6153315917, 0.0167563477],
+            [0.0117218943, -0.0082844420, 0.9883948585],
+        ];
         let c = ColourSpace::AcesCg;
         let unadapted = invert(&normalised_primary_matrix(c.primaries_xy().unwrap(), c.white_xy().unwrap())).unwrap();
         assert!(max_diff(&unadapted, &published) < 1e-9, "{unadapted:?}");

@@ -26,13 +26,13 @@
 //! measured slices (constant beyond them), and scaled to the full slice
 //! size.
 
-use super::file::{BakeFile, BasisSky, FogSettings, Quality};
-use super::run::spectral_settings;
 use crate::atmosphere::Atmosphere;
-use crate::lut::mapping::{self, DirectionMapping};
+use crate::bake::file::{BakeFile, BasisSky, FogSettings, Quality};
+use crate::bake::run::spectral_settings;
+use crate::directions::camera::Camera;
+use crate::directions::mapping::{self, DirectionMapping};
 use crate::mie::MieCache;
 use crate::render::adaptive::{ADAPTIVE_MIN_SPP, ADAPTIVE_PILOT_SPP};
-use crate::render::camera::Camera;
 use crate::render::tracer::Estimator;
 use crate::render::{self, Image, Scene, SingleScatter, View};
 use std::sync::atomic::AtomicBool;
@@ -172,10 +172,22 @@ pub enum BenchError {
 /// the Fog LUT's directions at a `stride`-th of its size each way, the
 /// fog slice's render (the Shadowed Fog: it has no single scattering of
 /// sunlight, so `method` changes nothing there).
-fn view(sky: &BasisSky, fog: Option<&FogSettings>, sun_zenith_deg: f64, stride: [usize; 2], spp: u32, seed: u64, method: SingleScatter) -> View {
+fn view(
+    sky: &BasisSky,
+    fog: Option<&FogSettings>,
+    sun_zenith_deg: f64,
+    stride: [usize; 2],
+    spp: u32,
+    seed: u64,
+    method: SingleScatter,
+) -> View {
     if let Some(f) = fog {
         let subset = FogSettings { width: (f.width / stride[0]).max(1), height: (f.height / stride[1]).max(1), ..*f };
-        return View { seed, single_scatter: method, ..super::fog::fog_view_at(sky, &subset, spp, sun_zenith_deg, true) };
+        return View {
+            seed,
+            single_scatter: method,
+            ..crate::bake::fog::fog_view_at(sky, &subset, spp, sun_zenith_deg, true)
+        };
     }
     View {
         camera: Camera::Lut { mapping: DirectionMapping::new(sun_zenith_deg, sky.threshold_deg), sun_azimuth_deg: 0.0 },
@@ -195,7 +207,13 @@ fn view(sky: &BasisSky, fog: Option<&FogSettings>, sun_zenith_deg: f64, stride: 
 }
 
 /// Renders on the pool, returning the image and its core-seconds.
-fn timed(pool: &rayon::ThreadPool, threads: usize, scene: &Scene, view: &View, cancel: &AtomicBool) -> Result<(Image, f64), BenchError> {
+fn timed(
+    pool: &rayon::ThreadPool,
+    threads: usize,
+    scene: &Scene,
+    view: &View,
+    cancel: &AtomicBool,
+) -> Result<(Image, f64), BenchError> {
     let start = Instant::now();
     let img = pool.install(|| render::render(scene, view, cancel, &|| {})).map_err(|_| BenchError::Cancelled)?;
     Ok((img, start.elapsed().as_secs_f64() * threads as f64))
@@ -216,9 +234,11 @@ fn measure(
 ) -> Result<SliceCost, BenchError> {
     let measured = view(sky, fog, sun_zenith_deg, o.stride, o.spp, MEASURED_SEED, method);
     let (img, core_seconds) = timed(pool, o.threads, scene, &measured, cancel)?;
-    let (_, one_core_seconds) = timed(pool, o.threads, scene, &view(sky, fog, sun_zenith_deg, o.stride, 1, MEASURED_SEED, method), cancel)?;
+    let (_, one_core_seconds) =
+        timed(pool, o.threads, scene, &view(sky, fog, sun_zenith_deg, o.stride, 1, MEASURED_SEED, method), cancel)?;
     // A fog slice's Fog: its render plus the quadrature, per texel.
-    let quadrature = if fog.is_some() { pool.install(|| super::fog::time_quadrature(scene, &measured)) } else { 0.0 };
+    let quadrature =
+        if fog.is_some() { pool.install(|| crate::bake::fog::time_quadrature(scene, &measured)) } else { 0.0 };
     let n = o.spp as f64;
     let (mut e2, mut s2, mut own, mut own_each) = (0.0, 0.0, 0.0, Vec::new());
     let mut ref_rel = Vec::new();
@@ -307,19 +327,35 @@ fn interpolate(points: &[(f64, f64)], x: f64) -> f64 {
 }
 
 /// Runs the benchmark; `on_slice` hears of each measured slice.
-pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBool, on_slice: &dyn Fn(&SliceCost)) -> Result<BenchReport, BenchError> {
+pub fn run(
+    bake: &BakeFile,
+    o: &BenchOptions,
+    mie: &MieCache,
+    cancel: &AtomicBool,
+    on_slice: &dyn Fn(&SliceCost),
+) -> Result<BenchReport, BenchError> {
     for name in &o.skies {
         if !bake.skies.iter().any(|s| &s.name == name) {
             return Err(BenchError::NoSuchSky(name.clone()));
         }
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(o.threads).build().map_err(|e| BenchError::Threads(e.to_string()))?;
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(o.threads)
+        .build()
+        .map_err(|e| BenchError::Threads(e.to_string()))?;
     let mut zeniths = o.sun_zenith_deg.clone();
     zeniths.sort_by(f64::total_cmp);
     let zero: Vec<(SingleScatter, f64)> = o.methods.iter().map(|m| (*m, 0.0)).collect();
-    let mut report = BenchReport { slices: Vec::new(), skies: Vec::new(), total_core_hours: zero.clone(), total_capped_core_hours: zero, coarse_ms: Vec::new() };
+    let mut report = BenchReport {
+        slices: Vec::new(),
+        skies: Vec::new(),
+        total_core_hours: zero.clone(),
+        total_capped_core_hours: zero,
+        coarse_ms: Vec::new(),
+    };
     for sky in bake.skies.iter().filter(|s| o.skies.is_empty() || o.skies.contains(&s.name)) {
-        let (atm, _) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BenchError::Atmosphere { sky: sky.name.clone(), error })?;
+        let (atm, _) = Atmosphere::load_bundle(&sky.atmosphere)
+            .map_err(|error| BenchError::Atmosphere { sky: sky.name.clone(), error })?;
         // The final quality's optics and cap, whatever the bake file's draft.
         let final_ = sky.sampling(Quality::Final).clone();
         let cap = final_.spp;
@@ -331,10 +367,12 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
         // The coarser grids measured, by name, in the order of each slice's `coarse_ms`.
         let lut_grid = (o.coarse_ms && !o.fog).then(|| format!("lut {}x{}", o.stride[0], o.stride[1]));
         let own_grid = o.coarse_ms_grid.filter(|_| !o.fog);
-        let grid_names: Vec<String> = lut_grid.iter().cloned().chain(own_grid.map(|g| format!("own {}x{}", g[0], g[1]))).collect();
+        let grid_names: Vec<String> =
+            lut_grid.iter().cloned().chain(own_grid.map(|g| format!("own {}x{}", g[0], g[1]))).collect();
         for &z in &zeniths {
             let fog = o.fog.then_some(&bake.fog);
-            let reference_view = view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature);
+            let reference_view =
+                view(sky, fog, z, o.stride, o.reference_spp, REFERENCE_SEED, SingleScatter::Quadrature);
             let (reference, _) = timed(&pool, o.threads, &scene, &reference_view, cancel)?;
             // Each coarser grid's accuracy and nodes over texels.
             let mut grids = Vec::new();
@@ -345,7 +383,8 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
             if let Some(g) = own_grid {
                 // The bake's grid: the sky's nodes measured, and the ground's too.
                 let m = super::bench_coarse::measure_latlong(&reference_view, g, &scene, &pool, cancel)?;
-                let nodes = super::ms_grid::MsGrid::new(g, scene.medium.standpoint(sky.altitude_m / 1000.0)).nodes();
+                let nodes =
+                    crate::bake::ms_grid::MsGrid::new(g, scene.medium.standpoint(sky.altitude_m / 1000.0)).nodes();
                 grids.push((m, nodes as f64 / full));
             }
             for (k, &method) in o.methods.iter().enumerate() {
@@ -374,7 +413,9 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
                 report.slices.push(c);
             }
         }
-        let slice_zeniths: Vec<f64> = (0..sky.slices).map(|i| mapping::slice_sun_zenith_deg(i, atm.planet.radius_km, atm.planet.top_km)).collect();
+        let slice_zeniths: Vec<f64> = (0..sky.slices)
+            .map(|i| mapping::slice_sun_zenith_deg(i, atm.planet.radius_km, atm.planet.top_km))
+            .collect();
         for (k, &method) in o.methods.iter().enumerate() {
             let price = |variant: usize, which: usize| -> f64 {
                 let points: Vec<(f64, f64)> = per_method[k].iter().map(|p| (p.0, p.1[variant][which])).collect();
@@ -383,10 +424,21 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
             let (core_hours, capped_core_hours) = (price(0, 0), price(0, 1));
             report.total_core_hours[k].1 += core_hours;
             report.total_capped_core_hours[k].1 += capped_core_hours;
-            report.skies.push(SkyCost { sky: sky.name.clone(), method, slices: sky.slices, core_hours, capped_core_hours });
+            report.skies.push(SkyCost {
+                sky: sky.name.clone(),
+                method,
+                slices: sky.slices,
+                core_hours,
+                capped_core_hours,
+            });
             if method == SingleScatter::Quadrature {
                 for (v, grid) in grid_names.iter().enumerate() {
-                    report.coarse_ms.push(CoarseSkyCost { sky: sky.name.clone(), grid: grid.clone(), core_hours: price(v + 1, 0), capped_core_hours: price(v + 1, 1) });
+                    report.coarse_ms.push(CoarseSkyCost {
+                        sky: sky.name.clone(),
+                        grid: grid.clone(),
+                        core_hours: price(v + 1, 0),
+                        capped_core_hours: price(v + 1, 1),
+                    });
                 }
             }
         }
@@ -394,7 +446,10 @@ pub fn run(bake: &BakeFile, o: &BenchOptions, mie: &MieCache, cancel: &AtomicBoo
     let mut totals: Vec<CoarseSkyCost> = Vec::new();
     for c in &report.coarse_ms {
         match totals.iter_mut().find(|t| t.grid == c.grid) {
-            Some(t) => (t.core_hours, t.capped_core_hours) = (t.core_hours + c.core_hours, t.capped_core_hours + c.capped_core_hours),
+            Some(t) => {
+                (t.core_hours, t.capped_core_hours) =
+                    (t.core_hours + c.core_hours, t.capped_core_hours + c.capped_core_hours)
+            }
             None => totals.push(CoarseSkyCost { sky: "total".into(), ..c.clone() }),
         }
     }

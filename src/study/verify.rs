@@ -23,20 +23,22 @@
 //!   error at slice centres; slice interpolation what the between-slice
 //!   elevations add to it.
 
-use super::cache::SliceCache;
-use super::file::BakeFile;
-use super::run::spectral_settings;
-use super::BakeError;
 use crate::atmosphere::Atmosphere;
-use crate::farm::coordinator::{Options, WorkerSpec};
-use crate::lut::colour::ColourSpace;
+use crate::bake::cache::SliceCache;
+use crate::bake::file::BakeFile;
+use crate::bake::run::spectral_settings;
+use crate::bake::BakeError;
+use crate::colour::error as colour_error;
+use crate::colour::ColourSpace;
+use crate::directions::camera::{direction_deg, Camera};
+use crate::directions::mapping;
 use crate::lut::decode::Luts;
-use crate::lut::{colour_error, mapping};
 use crate::mie::MieCache;
-use crate::render::camera::{direction_deg, Camera};
 use crate::render::tracer::Estimator;
 use crate::render::{SingleScatter, View};
+use crate::session::farm::{Options, WorkerSpec};
 use crate::session::{OpticsCache, Session};
+use crate::stats::{percentile, sky_lattice};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -61,7 +63,13 @@ pub struct VerifyOptions {
 
 impl Default for VerifyOptions {
     fn default() -> VerifyOptions {
-        VerifyOptions { directions: 400, spp: 256, fog_spp: 4096, centre_slices: vec![10, 30, 44, 47, 52, 60], workers: Vec::new() }
+        VerifyOptions {
+            directions: 400,
+            spp: 256,
+            fog_spp: 4096,
+            centre_slices: vec![10, 30, 44, 47, 52, 60],
+            workers: Vec::new(),
+        }
     }
 }
 
@@ -132,29 +140,6 @@ pub struct SkyVerification {
     pub fog: Option<super::verify_fog::FogVerification>,
 }
 
-/// The `p` quantile (nearest rank) of `v`, which it sorts; NaN if empty.
-pub fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[((v.len() - 1) as f64 * p).round() as usize]
-}
-
-/// A Fibonacci lattice of `n` directions above the horizon: (zenith,
-/// azimuth) in degrees, elevation from 0.5° up, even in solid angle.
-pub fn sky_lattice(n: usize) -> Vec<(f64, f64)> {
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    let mu_min = libm::sin(0.5f64.to_radians());
-    (0..n)
-        .map(|i| {
-            let mu = mu_min + (1.0 - mu_min) * (i as f64 + 0.5) / n as f64;
-            let az = (i as f64 * golden).to_degrees().rem_euclid(360.0);
-            (libm::acos(mu).to_degrees(), az)
-        })
-        .collect()
-}
-
 /// Verifies every basis sky of `luts` that `bake` names (the bake file
 /// gives the atmospheres and the quality's spectral settings);
 /// `on_reference(sky, sun elevation)` is called before each reference
@@ -170,33 +155,44 @@ pub fn verify(
     on_reference: &dyn Fn(&str, f64),
     cancel: Arc<AtomicBool>,
 ) -> Result<Vec<SkyVerification>, BakeError> {
-    let quality = if luts.manifest.quality == "final" { super::Quality::Final } else { super::Quality::Draft };
+    let quality =
+        if luts.manifest.quality == "final" { crate::bake::Quality::Final } else { crate::bake::Quality::Draft };
     let dirs = sky_lattice(opts.directions);
     let mut out = Vec::new();
     for (entry, texture) in luts.manifest.skies.iter().zip(&luts.textures) {
         let Some(sky) = bake.skies.iter().find(|s| s.name == entry.name) else { continue };
-        let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
+        let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere)
+            .map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
         let sampling = sky.sampling(quality).clone();
         let spectral = spectral_settings(&sampling);
-        let session = Session::new(atm, bundle, spectral.clone(), optics, mie, opts.workers.clone(), Options::default(), &|| {});
+        let session =
+            Session::new(atm, bundle, spectral.clone(), optics, mie, opts.workers.clone(), Options::default(), &|| {});
         let mut elevations: Vec<(f64, bool)> = BETWEEN_SLICES_DEG.iter().map(|&e| (e, false)).collect();
         for &i in &opts.centre_slices {
             elevations.push((90.0 - mapping::slice_sun_zenith_deg(i, entry.planet_radius_km, entry.top_km), true));
         }
         // The interpolation part of the error, without noise.
-        let model = crate::lut::interpolation::SingleScatteringSky { scene: &session.scene, altitude_km: sky.altitude_m / 1000.0 };
+        let model = crate::study::interpolation::SingleScatteringSky {
+            scene: &session.scene,
+            altitude_km: sky.altitude_m / 1000.0,
+        };
         let lattice: Vec<glam::DVec3> = dirs.iter().map(|&(z, a)| direction_deg(z, a)).collect();
         let elevs: Vec<f64> = elevations.iter().map(|e| e.0.max(0.0)).collect();
-        let split = crate::lut::interpolation::split(&model, entry, &elevs, &lattice);
-        use crate::lut::interpolation::SkyModel;
+        let split = crate::study::interpolation::split(&model, entry, &elevs, &lattice);
+        use crate::study::interpolation::SkyModel;
         let mut errors = Vec::new();
         for ((elev, centre), (both, direction)) in elevations.into_iter().zip(split) {
             on_reference(&sky.name, elev);
             let view = View::directions(dirs.clone(), 90.0 - elev, sky.altitude_m, opts.spp, REFERENCE_SEED);
-            let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
+            let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render {
+                sky: sky.name.clone(),
+                index: usize::MAX,
+                source,
+            })?;
             let sun = direction_deg(90.0 - elev, 0.0);
             let reference: Vec<[f64; 3]> = r.image.pixels.iter().map(|p| p.xyz).collect();
-            let decoded: Vec<[f64; 3]> = dirs.iter().map(|&(z, a)| luts.sample_xyz_of(entry, texture, elev, direction_deg(z, a))).collect();
+            let decoded: Vec<[f64; 3]> =
+                dirs.iter().map(|&(z, a)| luts.sample_xyz_of(entry, texture, elev, direction_deg(z, a))).collect();
             let white_y = {
                 let mut y: Vec<f64> = reference.iter().map(|x| x[1]).collect();
                 percentile(&mut y, 0.99).max(1e-30)
@@ -222,7 +218,8 @@ pub fn verify(
             let n = rel.len().max(1) as f64;
             let sun_rel_y = sun_error(luts, entry, &session, sky.altitude_m, elev);
             let ambient_rel_y = ambient_error(luts, entry, &dirs, &reference, elev);
-            let mut ref_rel: Vec<f64> = r.image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
+            let mut ref_rel: Vec<f64> =
+                r.image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
             errors.push(ElevationError {
                 sun_elevation_deg: elev,
                 slice_centre: centre,
@@ -236,7 +233,12 @@ pub fn verify(
                 reference_median_rel_stderr_y: percentile(&mut ref_rel, 0.5),
                 interpolation: (elev >= 0.0).then(|| InterpolationSplit {
                     single_scattering_fraction: {
-                        let mut f: Vec<f64> = dirs.iter().zip(&reference).filter(|(_, x)| x[1] > 0.0).map(|(&(z, a), x)| model.xyz(90.0 - elev, direction_deg(z, a))[1] / x[1]).collect();
+                        let mut f: Vec<f64> = dirs
+                            .iter()
+                            .zip(&reference)
+                            .filter(|(_, x)| x[1] > 0.0)
+                            .map(|(&(z, a), x)| model.xyz(90.0 - elev, direction_deg(z, a))[1] / x[1])
+                            .collect();
                         percentile(&mut f, 0.5)
                     },
                     median_rel_y: both.median,
@@ -255,18 +257,31 @@ pub fn verify(
             _ => (None, None),
         };
         let fog = super::verify_fog::verify_fog(luts, &entry.name, &session, sky.altitude_m, opts.fog_spp, &cancel)?;
-        out.push(SkyVerification { sky: entry.name.clone(), elevations: errors, bake_median_rel_stderr_y: percentile(&mut noise, 0.5), quantisation_median_rel: qm, quantisation_p99_rel: qp, fog });
+        out.push(SkyVerification {
+            sky: entry.name.clone(),
+            elevations: errors,
+            bake_median_rel_stderr_y: percentile(&mut noise, 0.5),
+            quantisation_median_rel: qm,
+            quantisation_p99_rel: qp,
+            fog,
+        });
     }
     Ok(out)
 }
 
 /// Y of linear RGB in the manifest's colour space.
 fn y_of(luts: &Luts, rgb: [f64; 3]) -> f64 {
-    crate::lut::decode::mat_mul(&luts.manifest.colour.xyz_from_rgb, rgb)[1]
+    crate::colour::apply(&luts.manifest.colour.xyz_from_rgb, rgb)[1]
 }
 
 /// See [`ElevationError::sun_rel_y`].
-fn sun_error(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, session: &Session, altitude_m: f64, elevation_deg: f64) -> Option<f64> {
+fn sun_error(
+    luts: &Luts,
+    entry: &crate::lut::manifest::SkyEntry,
+    session: &Session,
+    altitude_m: f64,
+    elevation_deg: f64,
+) -> Option<f64> {
     if elevation_deg <= 0.0 {
         return None;
     }
@@ -275,12 +290,18 @@ fn sun_error(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, session: &Sess
     let top = entry.sun.as_ref()?.top_irradiance_rgb;
     let t = luts.sun_transmittance(i, altitude_m / 1000.0, mu)?;
     let decoded = y_of(luts, std::array::from_fn(|c| top[c] * t[c]));
-    let want = crate::lut::transmittance::sun_xyz_at(&session.scene, altitude_m / 1000.0, mu)[1];
+    let want = crate::bake::tables::sun_xyz_at(&session.scene, altitude_m / 1000.0, mu)[1];
     (want > 0.0).then(|| (decoded - want).abs() / want)
 }
 
 /// See [`ElevationError::ambient_rel_y`].
-fn ambient_error(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, dirs: &[(f64, f64)], reference: &[[f64; 3]], elevation_deg: f64) -> Option<f64> {
+fn ambient_error(
+    luts: &Luts,
+    entry: &crate::lut::manifest::SkyEntry,
+    dirs: &[(f64, f64)],
+    reference: &[[f64; 3]],
+    elevation_deg: f64,
+) -> Option<f64> {
     let a = entry.ambient.as_ref()?;
     let (i0, i1, f) = crate::lut::decode::slice_pair(entry, 90.0 - elevation_deg);
     let decoded = y_of(luts, crate::lut::ambient::Ambient::lerp(&a[i0], &a[i1], f).irradiance_up);
@@ -299,11 +320,11 @@ fn quantisation(
     entry: &crate::lut::manifest::SkyEntry,
     texture: &crate::lut::decode::Texture,
     session: &Session,
-    sampling: &super::Sampling,
-    quality: super::Quality,
+    sampling: &crate::bake::Sampling,
+    quality: crate::bake::Quality,
 ) -> Option<(f64, f64)> {
     let space: ColourSpace = luts.manifest.colour.space.parse().ok()?;
-    let sky = super::BasisSky {
+    let sky = crate::bake::BasisSky {
         name: entry.name.clone(),
         atmosphere: Default::default(),
         width: entry.width,
@@ -317,8 +338,21 @@ fn quantisation(
     };
     let mut rel = Vec::new();
     for (index, s) in entry.slices.iter().enumerate() {
-        let view = super::run::slice_view(&sky, sampling, index, entry.planet_radius_km, entry.top_km, entry.threshold_sun_zenith_deg);
-        let key = super::run::sky_slice_key(&session.atmosphere.content_hash, &session.spectral, &view, quality, sampling);
+        let view = crate::bake::run::slice_view(
+            &sky,
+            sampling,
+            index,
+            entry.planet_radius_km,
+            entry.top_km,
+            entry.threshold_sun_zenith_deg,
+        );
+        let key = crate::bake::run::sky_slice_key(
+            &session.atmosphere.content_hash,
+            &session.spectral,
+            &view,
+            quality,
+            sampling,
+        );
         let slice = cache.get(&key)?;
         let scale = (-s.scale_log2 as f64).exp2();
         for (t, x) in texture.layers[index].iter().zip(&slice.xyz) {
@@ -340,7 +374,11 @@ fn quantisation(
 /// The decoded twilight of one basis sky: (sun elevation, Y at the zenith,
 /// Y on the horizon toward the sun, Y on the horizon away from it), the sun
 /// from 0 to −10° in 0.1° steps; the horizon read at 1° elevation.
-pub fn twilight_curve(luts: &Luts, entry: &crate::lut::manifest::SkyEntry, texture: &crate::lut::decode::Texture) -> Vec<[f64; 4]> {
+pub fn twilight_curve(
+    luts: &Luts,
+    entry: &crate::lut::manifest::SkyEntry,
+    texture: &crate::lut::decode::Texture,
+) -> Vec<[f64; 4]> {
     (0..=100)
         .map(|k| {
             let e = -0.1 * k as f64;
@@ -371,17 +409,20 @@ pub fn largest_log_step(curve: &[[f64; 4]]) -> f64 {
 pub fn reference_twilight_step(
     bake: &BakeFile,
     sky_name: &str,
-    quality: super::Quality,
+    quality: crate::bake::Quality,
     spp: u32,
     optics: &OpticsCache,
     mie: &MieCache,
     workers: Vec<WorkerSpec>,
     cancel: Arc<AtomicBool>,
 ) -> Result<f64, BakeError> {
-    let sky = bake.skies.iter().find(|s| s.name == sky_name).ok_or_else(|| BakeError::NoSuchSlice(sky_name.to_string()))?;
-    let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere).map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
+    let sky =
+        bake.skies.iter().find(|s| s.name == sky_name).ok_or_else(|| BakeError::NoSuchSlice(sky_name.to_string()))?;
+    let (atm, bundle) = Atmosphere::load_bundle(&sky.atmosphere)
+        .map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
     let sampling = sky.sampling(quality).clone();
-    let session = Session::new(atm, bundle, spectral_settings(&sampling), optics, mie, workers, Options::default(), &|| {});
+    let session =
+        Session::new(atm, bundle, spectral_settings(&sampling), optics, mie, workers, Options::default(), &|| {});
     let dirs = vec![(0.0, 0.0), (89.0, 0.0), (89.0, 180.0)];
     let mut ys: Vec<[f64; 3]> = Vec::new();
     for k in 0..=20 {
@@ -401,7 +442,11 @@ pub fn reference_twilight_step(
             fog: None,
             max_rel_error: None,
         };
-        let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: sky.name.clone(), index: usize::MAX, source })?;
+        let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render {
+            sky: sky.name.clone(),
+            index: usize::MAX,
+            source,
+        })?;
         ys.push([r.image.pixels[0].xyz[1], r.image.pixels[1].xyz[1], r.image.pixels[2].xyz[1]]);
     }
     let mut worst: f64 = 0.0;

@@ -6,7 +6,7 @@
 //! error next to that of the depth-free alternative (the Fog LUT's value
 //! at every depth, the talk's first attempt).
 
-use super::fog::{falloff_theta, Falloff, FalloffSample, FogGeometry};
+use crate::lut::fog::{falloff_theta, Falloff, FalloffSample, FogGeometry};
 use crate::render::fog::Fog;
 use crate::render::{render, RenderError, Scene, View};
 use serde::{Deserialize, Serialize};
@@ -41,7 +41,13 @@ pub struct ErrorSummary {
 impl ErrorSummary {
     pub fn of(mut e: Vec<f64>) -> ErrorSummary {
         e.sort_by(f64::total_cmp);
-        let at = |q: f64| if e.is_empty() { f64::NAN } else { e[((q * (e.len() - 1) as f64).round() as usize).min(e.len() - 1)] };
+        let at = |q: f64| {
+            if e.is_empty() {
+                f64::NAN
+            } else {
+                e[((q * (e.len() - 1) as f64).round() as usize).min(e.len() - 1)]
+            }
+        };
         ErrorSummary { median: at(0.5), p99: at(0.99) }
     }
 }
@@ -63,14 +69,31 @@ pub struct FalloffStudy {
 impl FalloffStudy {
     /// The samples the fit was made from.
     pub fn samples(&self) -> Vec<FalloffSample> {
-        self.curves.iter().flat_map(|c| DEPTHS_X.iter().zip(&c.ratios).map(|(&x, &ratio)| FalloffSample { x, theta: falloff_theta(c.elevation_deg), ratio })).collect()
+        self.curves
+            .iter()
+            .flat_map(|c| {
+                DEPTHS_X.iter().zip(&c.ratios).map(|(&x, &ratio)| FalloffSample {
+                    x,
+                    theta: falloff_theta(c.elevation_deg),
+                    ratio,
+                })
+            })
+            .collect()
     }
 }
 
 /// Renders the reference fog of `scene` under `geometry` at each sun
 /// zenith angle (sun at azimuth 0) and fits the falloff. `on_view` is
 /// called after each of the (suns × elevations × (depths + 1)) renders.
-pub fn study(scene: &Scene, geometry: FogGeometry, sun_zenith_degs: &[f64], spp: u32, seed: u64, cancel: &AtomicBool, on_view: &(dyn Fn() + Sync)) -> Result<FalloffStudy, RenderError> {
+pub fn study(
+    scene: &Scene,
+    geometry: FogGeometry,
+    sun_zenith_degs: &[f64],
+    spp: u32,
+    seed: u64,
+    cancel: &AtomicBool,
+    on_view: &(dyn Fn() + Sync),
+) -> Result<FalloffStudy, RenderError> {
     let mut curves = Vec::new();
     for &sun_zenith_deg in sun_zenith_degs {
         for &elevation_deg in &ELEVATIONS_DEG {
@@ -78,7 +101,10 @@ pub fn study(scene: &Scene, geometry: FogGeometry, sun_zenith_degs: &[f64], spp:
             let dirs: Vec<(f64, f64)> = AZIMUTHS_DEG.iter().map(|&a| (90.0 - elevation_deg, a)).collect();
             let y_at = |x: f64| -> Result<Vec<f64>, RenderError> {
                 let fog = Fog::lit(x * depth_max, Some(geometry.ceiling_km));
-                let view = View { fog: Some(fog), ..View::directions(dirs.clone(), sun_zenith_deg, geometry.observer_altitude_km * 1000.0, spp, seed) };
+                let view = View {
+                    fog: Some(fog),
+                    ..View::directions(dirs.clone(), sun_zenith_deg, geometry.observer_altitude_km * 1000.0, spp, seed)
+                };
                 let image = render(scene, &view, cancel, &|| {})?;
                 on_view();
                 Ok(image.pixels.iter().map(|p| p.xyz[1]).collect())
@@ -91,12 +117,20 @@ pub fn study(scene: &Scene, geometry: FogGeometry, sun_zenith_degs: &[f64], spp:
             }
         }
     }
-    let mut s =
-        FalloffStudy { geometry, falloff: Falloff { a: 0.0, p: 0.0 }, curves, fit_error: ErrorSummary { median: 0.0, p99: 0.0 }, depth_free_error: ErrorSummary { median: 0.0, p99: 0.0 }, spp };
+    let mut s = FalloffStudy {
+        geometry,
+        falloff: Falloff { a: 0.0, p: 0.0 },
+        curves,
+        fit_error: ErrorSummary { median: 0.0, p99: 0.0 },
+        depth_free_error: ErrorSummary { median: 0.0, p99: 0.0 },
+        spp,
+    };
     let samples = s.samples();
     s.falloff = Falloff::fit(&samples);
     s.fit_error = ErrorSummary::of(s.falloff.errors(&samples));
-    s.depth_free_error = ErrorSummary::of(samples.iter().filter(|x| x.ratio > 0.0 && x.ratio.is_finite()).map(|x| (1.0 / x.ratio - 1.0).abs()).collect());
+    s.depth_free_error = ErrorSummary::of(
+        samples.iter().filter(|x| x.ratio > 0.0 && x.ratio.is_finite()).map(|x| (1.0 / x.ratio - 1.0).abs()).collect(),
+    );
     Ok(s)
 }
 
@@ -122,7 +156,12 @@ mod tests {
     fn the_fitted_falloff_beats_the_depth_free_lut() {
         let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
         let atm = Atmosphere::load(&root.join("atmospheres/clear.toml")).unwrap();
-        let spectral = SpectralSettings { band_nm: 40.0, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![], xyz: true };
+        let spectral = SpectralSettings {
+            band_nm: 40.0,
+            wavelength_sampling: WavelengthSampling::Hero,
+            spectral_nm: vec![],
+            xyz: true,
+        };
         let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
         let g = FogGeometry { planet_radius_km: scene.medium.radius_km, observer_altitude_km: 0.0, ceiling_km: 3.0 };
         let s = study(&scene, g, &[60.0], 16, 1, &AtomicBool::new(false), &|| {}).unwrap();
@@ -133,6 +172,11 @@ mod tests {
             }
         }
         assert!(s.fit_error.median < 0.15, "{:?}", s.fit_error);
-        assert!(s.depth_free_error.median > 1.0 && s.fit_error.median < 0.2 * s.depth_free_error.median, "{:?} vs {:?}", s.fit_error, s.depth_free_error);
+        assert!(
+            s.depth_free_error.median > 1.0 && s.fit_error.median < 0.2 * s.depth_free_error.median,
+            "{:?} vs {:?}",
+            s.fit_error,
+            s.depth_free_error
+        );
     }
 }

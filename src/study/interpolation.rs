@@ -21,13 +21,13 @@
 //! single scattering, so these errors bound those of the whole sky from
 //! above, as far as interpolation goes.
 
-use super::decode::{sample_sky, Texture};
-use super::manifest::{SkyEntry, SliceEntry};
-use super::mapping::{self, DirectionMapping};
-use crate::bake::verify::percentile;
-use crate::render::camera::direction_deg;
+use crate::directions::camera::direction_deg;
+use crate::directions::mapping::{self, DirectionMapping};
+use crate::lut::decode::{sample_sky, Texture};
+use crate::lut::manifest::{SkyEntry, SliceEntry};
 use crate::render::single::SingleScattering;
 use crate::render::Scene;
+use crate::stats::percentile;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -45,7 +45,8 @@ pub struct SingleScatteringSky<'a> {
 
 impl SkyModel for SingleScatteringSky<'_> {
     fn xyz(&self, sun_zenith_deg: f64, dir: DVec3) -> [f64; 3] {
-        SingleScattering::bands(self.scene, direction_deg(sun_zenith_deg, 0.0), self.altitude_km).xyz(&self.scene.bands.weight, dir)
+        SingleScattering::bands(self.scene, direction_deg(sun_zenith_deg, 0.0), self.altitude_km)
+            .xyz(&self.scene.bands.weight, dir)
     }
 }
 
@@ -98,14 +99,27 @@ impl Errors {
     /// left out) and over the aureole lattice.
     fn of(sun: DVec3, dirs: &[DVec3], rel: &[f64], aureole: &[f64]) -> Errors {
         let cos_aureole = AUREOLE_DEG.to_radians().cos();
-        let mut sky: Vec<f64> = dirs.iter().zip(rel).filter(|(d, _)| d.dot(sun) <= cos_aureole).map(|(_, e)| *e).collect();
-        let a = (!aureole.is_empty()).then(|| (percentile(&mut aureole.to_vec(), 0.5), percentile(&mut aureole.to_vec(), 0.99)));
-        Errors { median: percentile(&mut sky.clone(), 0.5), p99: percentile(&mut sky, 0.99), aureole_median: a.map(|a| a.0), aureole_p99: a.map(|a| a.1) }
+        let mut sky: Vec<f64> =
+            dirs.iter().zip(rel).filter(|(d, _)| d.dot(sun) <= cos_aureole).map(|(_, e)| *e).collect();
+        let a = (!aureole.is_empty())
+            .then(|| (percentile(&mut aureole.to_vec(), 0.5), percentile(&mut aureole.to_vec(), 0.99)));
+        Errors {
+            median: percentile(&mut sky.clone(), 0.5),
+            p99: percentile(&mut sky, 0.99),
+            aureole_median: a.map(|a| a.0),
+            aureole_p99: a.map(|a| a.1),
+        }
     }
 }
 
 /// One slice of `model` at texel centres, XYZ, rows of v top to bottom.
-pub fn slice_texels(model: &dyn SkyModel, m: &DirectionMapping, sun_centred: bool, width: usize, height: usize) -> Vec<[f32; 3]> {
+pub fn slice_texels(
+    model: &dyn SkyModel,
+    m: &DirectionMapping,
+    sun_centred: bool,
+    width: usize,
+    height: usize,
+) -> Vec<[f32; 3]> {
     let forced = DirectionMapping::new(m.sun_zenith_deg, if sun_centred { 180.0 } else { -1.0 });
     (0..width * height)
         .into_par_iter()
@@ -128,7 +142,14 @@ fn rel_y(decoded: f64, truth: f64) -> f64 {
 /// Direction interpolation alone: the slice of a sun at `sun_zenith_deg`
 /// in one region's mapping, decoded bilinearly at `dirs` (above the
 /// horizon), against the model.
-pub fn direction_error(model: &dyn SkyModel, sun_zenith_deg: f64, sun_centred: bool, width: usize, height: usize, dirs: &[DVec3]) -> Errors {
+pub fn direction_error(
+    model: &dyn SkyModel,
+    sun_zenith_deg: f64,
+    sun_centred: bool,
+    width: usize,
+    height: usize,
+    dirs: &[DVec3],
+) -> Errors {
     let m = DirectionMapping::new(sun_zenith_deg, 0.0);
     let tex = Texture { width, height, layers: vec![slice_texels(model, &m, sun_centred, width, height)] };
     let err = |d: &DVec3| {
@@ -144,12 +165,26 @@ pub fn direction_error(model: &dyn SkyModel, sun_zenith_deg: f64, sun_centred: b
 /// A basis sky of `model` baked in memory (XYZ, no scale, no
 /// quantisation), holding only the slices in `layers` (the others are
 /// black); the entry the decoder reads.
-pub fn in_memory_bake(model: &dyn SkyModel, width: usize, height: usize, radius_km: f64, top_km: f64, threshold_deg: f64, layers: &[usize]) -> (SkyEntry, Texture) {
+pub fn in_memory_bake(
+    model: &dyn SkyModel,
+    width: usize,
+    height: usize,
+    radius_km: f64,
+    top_km: f64,
+    threshold_deg: f64,
+    layers: &[usize],
+) -> (SkyEntry, Texture) {
     let mut slices = Vec::new();
     let mut texels = Vec::new();
     for i in 0..mapping::SLICES {
         let z = mapping::slice_sun_zenith_deg(i, radius_km, top_km);
-        slices.push(SliceEntry { index: i, sun_zenith_deg: z, scale_log2: 0, mean_samples: 0.0, median_rel_stderr_y: 0.0 });
+        slices.push(SliceEntry {
+            index: i,
+            sun_zenith_deg: z,
+            scale_log2: 0,
+            mean_samples: 0.0,
+            median_rel_stderr_y: 0.0,
+        });
         texels.push(if layers.contains(&i) {
             let m = DirectionMapping::new(z, threshold_deg);
             slice_texels(model, &m, m.sun_centred(), width, height)
@@ -193,8 +228,15 @@ pub fn slices_read(sun_zenith_deg: f64, radius_km: f64, top_km: f64) -> [usize; 
 
 /// Direction and slice interpolation together: the decoder's sky for a
 /// sun at `sun_zenith_deg` (between slices or not) against the model.
-pub fn decoded_error(model: &dyn SkyModel, entry: &SkyEntry, texture: &Texture, sun_zenith_deg: f64, dirs: &[DVec3]) -> Errors {
-    let err = |d: &DVec3| rel_y(sample_sky(entry, texture, sun_zenith_deg, 0.0, *d)[1], model.xyz(sun_zenith_deg, *d)[1]);
+pub fn decoded_error(
+    model: &dyn SkyModel,
+    entry: &SkyEntry,
+    texture: &Texture,
+    sun_zenith_deg: f64,
+    dirs: &[DVec3],
+) -> Errors {
+    let err =
+        |d: &DVec3| rel_y(sample_sky(entry, texture, sun_zenith_deg, 0.0, *d)[1], model.xyz(sun_zenith_deg, *d)[1]);
     let sun = direction_deg(sun_zenith_deg, 0.0);
     let rel: Vec<f64> = dirs.par_iter().map(err).collect();
     let aureole: Vec<f64> = aureole_lattice(sun, AUREOLE_DIRECTIONS).par_iter().map(err).collect();
@@ -230,9 +272,9 @@ pub fn twilight_steps(model: &dyn SkyModel, entry: &SkyEntry, texture: &Texture)
 }
 
 /// The directions of a Fibonacci lattice above the horizon (see
-/// `bake::verify::sky_lattice`).
+/// `stats::sky_lattice`).
 pub fn lattice(n: usize) -> Vec<DVec3> {
-    crate::bake::verify::sky_lattice(n).into_iter().map(|(z, a)| direction_deg(z, a)).collect()
+    crate::stats::sky_lattice(n).into_iter().map(|(z, a)| direction_deg(z, a)).collect()
 }
 
 /// Direction interpolation at one slice's sun in both mappings.
@@ -277,7 +319,16 @@ pub struct Report {
 
 /// Measures `model` baked at `width` × `height` (see the module
 /// documentation); `threshold_deg` None decodes with the measured threshold.
-pub fn measure(model: &dyn SkyModel, width: usize, height: usize, radius_km: f64, top_km: f64, directions: usize, between_deg: &[f64], threshold_deg: Option<f64>) -> Report {
+pub fn measure(
+    model: &dyn SkyModel,
+    width: usize,
+    height: usize,
+    radius_km: f64,
+    top_km: f64,
+    directions: usize,
+    between_deg: &[f64],
+    threshold_deg: Option<f64>,
+) -> Report {
     let dirs = lattice(directions);
     let mut regions = Vec::new();
     for index in 0..mapping::UPPER_SLICES {
@@ -325,7 +376,17 @@ pub fn measure(model: &dyn SkyModel, width: usize, height: usize, radius_km: f64
         })
         .collect();
     let (twilight_step_decoded, twilight_step_model) = twilight_steps(model, &entry, &texture);
-    Report { width, height, directions, regions, measured_threshold_deg: measured, threshold_deg: threshold, between, twilight_step_decoded, twilight_step_model }
+    Report {
+        width,
+        height,
+        directions,
+        regions,
+        measured_threshold_deg: measured,
+        threshold_deg: threshold,
+        between,
+        twilight_step_decoded,
+        twilight_step_model,
+    }
 }
 
 /// The interpolation part of a bake's error at sun elevations, for a bake
@@ -336,7 +397,8 @@ pub fn measure(model: &dyn SkyModel, width: usize, height: usize, radius_km: f64
 pub fn split(model: &dyn SkyModel, entry: &SkyEntry, elevations_deg: &[f64], dirs: &[DVec3]) -> Vec<(Errors, Errors)> {
     let (r, top) = (entry.planet_radius_km, entry.top_km);
     let layers: Vec<usize> = elevations_deg.iter().flat_map(|e| slices_read(90.0 - e, r, top)).collect();
-    let (bake, texture) = in_memory_bake(model, entry.width, entry.height, r, top, entry.threshold_sun_zenith_deg, &layers);
+    let (bake, texture) =
+        in_memory_bake(model, entry.width, entry.height, r, top, entry.threshold_sun_zenith_deg, &layers);
     elevations_deg
         .iter()
         .map(|&e| {
@@ -344,7 +406,10 @@ pub fn split(model: &dyn SkyModel, entry: &SkyEntry, elevations_deg: &[f64], dir
             // At a slice's own sun only that slice is read.
             let read = slices_read(90.0 - e, r, top);
             let at_centre = (bake.slices[read[0]].sun_zenith_deg - (90.0 - e)).abs() < 1e-9;
-            let own = read.iter().take(if at_centre { 1 } else { 2 }).map(|&i| decoded_error(model, &bake, &texture, bake.slices[i].sun_zenith_deg, dirs));
+            let own = read
+                .iter()
+                .take(if at_centre { 1 } else { 2 })
+                .map(|&i| decoded_error(model, &bake, &texture, bake.slices[i].sun_zenith_deg, dirs));
             let worse = own.reduce(|a, b| if a.p99 >= b.p99 { a } else { b }).expect("one slice at least");
             (both, worse)
         })
@@ -397,7 +462,10 @@ mod tests {
         let (entry, texture) = in_memory_bake(&Dusk, 16, 64, 6371.0, 100.0, 87.5, &layers);
         let (decoded, model) = twilight_steps(&Dusk, &entry, &texture);
         assert!(model > 0.1 && model < 0.2, "{model}");
-        assert!(decoded <= model * 1.01, "decoded twilight steps up to {decoded:.4} in log Y per 0.1°, the sky's own {model:.4}");
+        assert!(
+            decoded <= model * 1.01,
+            "decoded twilight steps up to {decoded:.4} in log Y per 0.1°, the sky's own {model:.4}"
+        );
     }
 
     #[test]

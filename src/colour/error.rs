@@ -61,7 +61,8 @@ pub fn delta_e2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
     } else {
         (h1p + h2p - 360.0) / 2.0
     };
-    let t = 1.0 - 0.17 * rad(hbarp - 30.0).cos() + 0.24 * rad(2.0 * hbarp).cos() + 0.32 * rad(3.0 * hbarp + 6.0).cos() - 0.20 * rad(4.0 * hbarp - 63.0).cos();
+    let t = 1.0 - 0.17 * rad(hbarp - 30.0).cos() + 0.24 * rad(2.0 * hbarp).cos() + 0.32 * rad(3.0 * hbarp + 6.0).cos()
+        - 0.20 * rad(4.0 * hbarp - 63.0).cos();
     let dtheta = 30.0 * (-((hbarp - 275.0) / 25.0).powi(2)).exp();
     let cbarp7 = cbarp.powi(7);
     let rc = 2.0 * (cbarp7 / (cbarp7 + 25f64.powi(7))).sqrt();

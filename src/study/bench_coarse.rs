@@ -29,9 +29,9 @@
 //! grid would have rows on either side of it) are counted apart.
 
 use super::bench::BenchError;
-use super::file::BasisSky;
-use crate::lut::mapping::DirectionMapping;
-use crate::render::camera::Camera;
+use crate::bake::file::BasisSky;
+use crate::directions::camera::Camera;
+use crate::directions::mapping::DirectionMapping;
 use crate::render::{self, Image, Scene, View};
 use glam::DVec3;
 use std::sync::atomic::AtomicBool;
@@ -74,7 +74,14 @@ fn zenith_azimuth_deg(d: DVec3) -> (f64, f64) {
 
 /// Measures one slice: `reference` is the benchmark's reference render of
 /// `reference_view` (the coarse grid).
-pub(super) fn measure(sky: &BasisSky, reference_view: &View, reference: &Image, scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<CoarseMs, BenchError> {
+pub(super) fn measure(
+    sky: &BasisSky,
+    reference_view: &View,
+    reference: &Image,
+    scene: &Scene,
+    pool: &rayon::ThreadPool,
+    cancel: &AtomicBool,
+) -> Result<CoarseMs, BenchError> {
     let (nw, nh) = (reference.width, reference.height);
     let mapping = DirectionMapping::new(reference_view.sun_zenith_deg, sky.threshold_deg);
     let camera = Camera::Lut { mapping, sun_azimuth_deg: reference_view.sun_azimuth_deg };
@@ -106,7 +113,13 @@ pub(super) fn measure(sky: &BasisSky, reference_view: &View, reference: &Image, 
     let view = View {
         single_scatter: reference_view.single_scatter,
         sun_azimuth_deg: reference_view.sun_azimuth_deg,
-        ..View::directions(dirs, reference_view.sun_zenith_deg, reference_view.altitude_m, reference_view.spp, CENTRE_SEED)
+        ..View::directions(
+            dirs,
+            reference_view.sun_zenith_deg,
+            reference_view.altitude_m,
+            reference_view.spp,
+            CENTRE_SEED,
+        )
     };
     let centres = pool.install(|| render::render(scene, &view, cancel, &|| {})).map_err(|_| BenchError::Cancelled)?;
     // Single scattering by quadrature, as the renders added it.
@@ -118,7 +131,15 @@ pub(super) fn measure(sky: &BasisSky, reference_view: &View, reference: &Image, 
     let samples: Vec<(Cell, DVec3)> = cells
         .iter()
         .zip(&centres.pixels)
-        .map(|((corners, c), p)| (Cell { corners: corners.map(|(a, b)| texel(&reference.pixels[b * nw + a], node_single[b * nw + a])), centre: texel(p, single_y(*c)) }, *c))
+        .map(|((corners, c), p)| {
+            (
+                Cell {
+                    corners: corners.map(|(a, b)| texel(&reference.pixels[b * nw + a], node_single[b * nw + a])),
+                    centre: texel(p, single_y(*c)),
+                },
+                *c,
+            )
+        })
         .collect();
     Ok(CoarseMs { horizon_cells, ..with_far(&samples, reference_view.sun_direction()) })
 }
@@ -130,33 +151,55 @@ fn texel(p: &render::PixelResult, single: f64) -> Texel {
 /// [`interpolation_error`] over all `cells` (each with its centre's
 /// direction), and over those away from the sun and the horizon.
 fn with_far(cells: &[(Cell, DVec3)], sun: DVec3) -> CoarseMs {
-    let far = |c: DVec3| c.z >= FAR_ELEVATION_DEG.to_radians().sin() && libm::acos(c.dot(sun).clamp(-1.0, 1.0)) >= FAR_SUN_DEG.to_radians();
+    let far = |c: DVec3| {
+        c.z >= FAR_ELEVATION_DEG.to_radians().sin()
+            && libm::acos(c.dot(sun).clamp(-1.0, 1.0)) >= FAR_SUN_DEG.to_radians()
+    };
     let all: Vec<Cell> = cells.iter().map(|(c, _)| c.clone()).collect();
     let far_cells: Vec<Cell> = cells.iter().filter(|(_, d)| far(*d)).map(|(c, _)| c.clone()).collect();
     let f = interpolation_error(&far_cells);
-    CoarseMs { far_cells: f.cells, far_rms_rel_error: f.rms_rel_error, far_noise_floor: f.noise_floor, ..interpolation_error(&all) }
+    CoarseMs {
+        far_cells: f.cells,
+        far_rms_rel_error: f.rms_rel_error,
+        far_noise_floor: f.noise_floor,
+        ..interpolation_error(&all)
+    }
 }
 
 /// Measures multiple scattering interpolated from a grid of its own over
 /// the sky (the sky's `rows` × `cols` nodes of the bake's
-/// [`super::ms_grid::MsGrid`]) instead of the
+/// [`crate::bake::ms_grid::MsGrid`]) instead of the
 /// LUT's texels, whose mapping bends steeply at low sun: nodes and cell
 /// centres rendered at the reference's samples. The sky above the horizon
 /// only (a grid below it, for the ground, would be of the same kind and is
 /// not measured).
-pub(super) fn measure_latlong(reference_view: &View, [rows, cols]: [usize; 2], scene: &Scene, pool: &rayon::ThreadPool, cancel: &AtomicBool) -> Result<CoarseMs, BenchError> {
+pub(super) fn measure_latlong(
+    reference_view: &View,
+    [rows, cols]: [usize; 2],
+    scene: &Scene,
+    pool: &rayon::ThreadPool,
+    cancel: &AtomicBool,
+) -> Result<CoarseMs, BenchError> {
     let az = reference_view.sun_azimuth_deg;
     // Row s and column t, both in [0, 1], of the grid's sky.
-    let grid = super::ms_grid::MsGrid::new([rows, cols], scene.medium.standpoint(reference_view.altitude_m / 1000.0));
-    let direction = |s: f64, t: f64| crate::render::camera::direction_deg(grid.sky_zenith_deg(s), az + 180.0 * t);
+    let grid =
+        crate::bake::ms_grid::MsGrid::new([rows, cols], scene.medium.standpoint(reference_view.altitude_m / 1000.0));
+    let direction = |s: f64, t: f64| crate::directions::camera::direction_deg(grid.sky_zenith_deg(s), az + 180.0 * t);
     let node = |i: usize, j: usize| direction(j as f64 / (rows - 1) as f64, i as f64 / (cols - 1) as f64);
-    let centre = |i: usize, j: usize| direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64);
+    let centre =
+        |i: usize, j: usize| direction((j as f64 + 0.5) / (rows - 1) as f64, (i as f64 + 0.5) / (cols - 1) as f64);
     let mut dirs: Vec<DVec3> = (0..rows * cols).map(|k| node(k % cols, k / cols)).collect();
     dirs.extend((0..(rows - 1) * (cols - 1)).map(|k| centre(k % (cols - 1), k / (cols - 1))));
     let view = View {
         single_scatter: reference_view.single_scatter,
         sun_azimuth_deg: az,
-        ..View::directions(dirs.iter().map(|d| zenith_azimuth_deg(*d)).collect(), reference_view.sun_zenith_deg, reference_view.altitude_m, reference_view.spp, CENTRE_SEED)
+        ..View::directions(
+            dirs.iter().map(|d| zenith_azimuth_deg(*d)).collect(),
+            reference_view.sun_zenith_deg,
+            reference_view.altitude_m,
+            reference_view.spp,
+            CENTRE_SEED,
+        )
     };
     let img = pool.install(|| render::render(scene, &view, cancel, &|| {})).map_err(|_| BenchError::Cancelled)?;
     let at = |k: usize| texel(&img.pixels[k], render::single_by_quadrature(scene, &view, dirs[k]).0[1]);
@@ -294,7 +337,7 @@ mod tests {
         for d in [DVec3::new(0.3, -0.4, 0.866), DVec3::new(-0.9, 0.1, -0.2), DVec3::Z] {
             let d = d.normalize();
             let (z, a) = zenith_azimuth_deg(d);
-            assert!((render::camera::direction_deg(z, a) - d).length() < 1e-12, "{d}");
+            assert!((crate::directions::direction_deg(z, a) - d).length() < 1e-12, "{d}");
         }
     }
 }

@@ -2,8 +2,8 @@
 //! relative luminance error over the sky in false colour, and a slice as
 //! it is stored (the texture itself).
 
-use super::decode::Texture;
-use crate::render::camera::Camera;
+use crate::directions::camera::Camera;
+use crate::lut::decode::Texture;
 use crate::render::{Image, PixelResult};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -39,7 +39,11 @@ pub fn ramp(rel: f64) -> [u8; 3] {
 /// A fisheye (zenith at the centre, the horizon at the rim, grey outside)
 /// of |decoded / truth − 1| in Y, `size` pixels square; `decoded` and
 /// `truth` give Y toward a direction (world frame, z up).
-pub fn error_fisheye(size: usize, decoded: &(dyn Fn(DVec3) -> f64 + Sync), truth: &(dyn Fn(DVec3) -> f64 + Sync)) -> Vec<u8> {
+pub fn error_fisheye(
+    size: usize,
+    decoded: &(dyn Fn(DVec3) -> f64 + Sync),
+    truth: &(dyn Fn(DVec3) -> f64 + Sync),
+) -> Vec<u8> {
     (0..size * size)
         .into_par_iter()
         .flat_map_iter(|i| {
@@ -63,16 +67,19 @@ pub fn error_fisheye(size: usize, decoded: &(dyn Fn(DVec3) -> f64 + Sync), truth
 /// A colour bar of the ramp, `width` × `height` pixels, 0.01 % at the left
 /// to 100 % at the right.
 pub fn ramp_bar(width: usize, height: usize) -> Vec<u8> {
-    let row: Vec<u8> = (0..width).flat_map(|x| ramp(10f64.powf(-4.0 + 4.0 * (x as f64 + 0.5) / width as f64))).collect();
+    let row: Vec<u8> =
+        (0..width).flat_map(|x| ramp(10f64.powf(-4.0 + 4.0 * (x as f64 + 0.5) / width as f64))).collect();
     (0..height).flat_map(|_| row.iter().copied()).collect()
 }
 
 /// Writes 8-bit RGB pixels as a PNG, whole or not at all.
 pub fn write_rgb_png(path: &Path, width: usize, height: usize, rgb: Vec<u8>) -> std::io::Result<()> {
-    let img = image::RgbImage::from_raw(width as u32, height as u32, rgb).ok_or_else(|| std::io::Error::other("image size"))?;
+    let img = image::RgbImage::from_raw(width as u32, height as u32, rgb)
+        .ok_or_else(|| std::io::Error::other("image size"))?;
     let mut png = Vec::new();
-    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).map_err(|e| std::io::Error::other(e.to_string()))?;
-    super::atomic::write_atomically(path, &png)
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| std::io::Error::other(e.to_string()))?;
+    crate::atomic::write_atomically(path, &png)
 }
 
 /// A stored slice (XYZ texels, rows of v top to bottom) as an image, each
@@ -92,8 +99,16 @@ pub fn slice_image(texture: &Texture, layer: usize, zoom: usize) -> Image {
 /// A fisheye of a sky given as XYZ toward a direction, for
 /// `render::output::write_png`.
 pub fn sky_fisheye(size: usize, xyz: &(dyn Fn(DVec3) -> [f64; 3] + Sync)) -> Image {
-    let pixels =
-        (0..size * size).into_par_iter().map(|i| PixelResult::from_xyz(Camera::Fisheye.direction((i % size) as f64 + 0.5, (i / size) as f64 + 0.5, size, size).map_or([0.0; 3], xyz))).collect();
+    let pixels = (0..size * size)
+        .into_par_iter()
+        .map(|i| {
+            PixelResult::from_xyz(
+                Camera::Fisheye
+                    .direction((i % size) as f64 + 0.5, (i / size) as f64 + 0.5, size, size)
+                    .map_or([0.0; 3], xyz),
+            )
+        })
+        .collect();
     Image { width: size, height: size, pixels }
 }
 

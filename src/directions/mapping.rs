@@ -123,7 +123,9 @@ pub fn default_threshold_deg(width: usize, height: usize) -> f64 {
 /// texels above the horizon, with the upper-region mapping forced.
 pub fn largest_texel_step_deg(sun_zenith_deg: f64, width: usize, height: usize) -> f64 {
     let theta_sun = sun_zenith_deg.to_radians();
-    let at = |i: usize, j: usize| upper_uv_to_direction((i as f64 + 0.5) / width as f64, (j as f64 + 0.5) / height as f64, theta_sun);
+    let at = |i: usize, j: usize| {
+        upper_uv_to_direction((i as f64 + 0.5) / width as f64, (j as f64 + 0.5) / height as f64, theta_sun)
+    };
     let mut worst: f64 = 0.0;
     for j in 0..height {
         for i in 0..width {
@@ -329,7 +331,7 @@ mod tests {
         for sun in [0.0, 30.0, 60.0, 80.0, 87.0] {
             let m = DirectionMapping::new(sun, 87.5);
             let s = m.direction(0.3, 0.0);
-            assert!((s - crate::render::camera::direction_deg(sun, 0.0)).length() < 1e-9, "{sun}");
+            assert!((s - crate::directions::camera::direction_deg(sun, 0.0)).length() < 1e-9, "{sun}");
             for k in 0..=20 {
                 let u = k as f64 / 20.0;
                 let h = m.direction(u, B);
@@ -365,12 +367,21 @@ mod tests {
         // both regions (a coarse check that the mapping leaves no holes).
         for sun in [30.0, 86.0, 95.0] {
             let m = DirectionMapping::new(sun, 87.5);
-            let texels: Vec<DVec3> = (0..64).flat_map(|i| (0..256).map(move |j| (i, j))).map(|(i, j)| m.direction((i as f64 + 0.5) / 64.0, (j as f64 + 0.5) / 256.0)).collect();
+            let texels: Vec<DVec3> = (0..64)
+                .flat_map(|i| (0..256).map(move |j| (i, j)))
+                .map(|(i, j)| m.direction((i as f64 + 0.5) / 64.0, (j as f64 + 0.5) / 256.0))
+                .collect();
             for a in 0..=18 {
                 for z in 0..=36 {
-                    let d = crate::render::camera::direction_deg(z as f64 * 5.0, a as f64 * 10.0);
+                    let d = crate::directions::camera::direction_deg(z as f64 * 5.0, a as f64 * 10.0);
                     let nearest = texels.iter().map(|t| angle(*t, d)).fold(f64::INFINITY, f64::min);
-                    assert!(nearest.to_degrees() < 12.0, "sun {sun}: ({}, {}) is {}° from any texel", z * 5, a * 10, nearest.to_degrees());
+                    assert!(
+                        nearest.to_degrees() < 12.0,
+                        "sun {sun}: ({}, {}) is {}° from any texel",
+                        z * 5,
+                        a * 10,
+                        nearest.to_degrees()
+                    );
                 }
             }
         }

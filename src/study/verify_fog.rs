@@ -6,14 +6,14 @@
 //! against the quadrature's transmittance of the same rays. Each is
 //! summarised by the median and 99th percentile relative error of Y.
 
-use super::verify::{percentile, REFERENCE_SEED};
-use super::BakeError;
-use crate::lut::decode::{mat_mul, Luts};
-use crate::lut::fog::AttenuationTable;
-use crate::render::camera::direction_deg;
+use super::verify::REFERENCE_SEED;
+use crate::bake::BakeError;
+use crate::directions::camera::direction_deg;
+use crate::lut::decode::Luts;
 use crate::render::fog::Fog;
 use crate::render::View;
 use crate::session::Session;
+use crate::stats::percentile;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
@@ -57,20 +57,37 @@ pub struct FogVerification {
 }
 
 /// Verifies the fog of the basis sky `name` (None if the bake has none).
-pub fn verify_fog(luts: &Luts, name: &str, session: &Session, altitude_m: f64, spp: u32, cancel: &Arc<AtomicBool>) -> Result<Option<FogVerification>, BakeError> {
+pub fn verify_fog(
+    luts: &Luts,
+    name: &str,
+    session: &Session,
+    altitude_m: f64,
+    spp: u32,
+    cancel: &Arc<AtomicBool>,
+) -> Result<Option<FogVerification>, BakeError> {
     let Some(entry) = luts.manifest.fog.as_ref() else { return Ok(None) };
     let Some(f) = entry.skies.iter().find(|s| s.name == name) else { return Ok(None) };
     let geometry = crate::lut::decode_fog::geometry_of(f, entry.ceiling_km);
-    let dirs: Vec<(f64, f64)> = FOG_VIEW_ELEVATIONS_DEG.iter().flat_map(|&e| FOG_VIEW_AZIMUTHS_DEG.iter().map(move |&a| (90.0 - e, a))).collect();
-    let y = |rgb: [f64; 3]| mat_mul(&luts.manifest.colour.xyz_from_rgb, rgb)[1];
+    let dirs: Vec<(f64, f64)> = FOG_VIEW_ELEVATIONS_DEG
+        .iter()
+        .flat_map(|&e| FOG_VIEW_AZIMUTHS_DEG.iter().map(move |&a| (90.0 - e, a)))
+        .collect();
+    let y = |rgb: [f64; 3]| crate::colour::apply(&luts.manifest.colour.xyz_from_rgb, rgb)[1];
     let (mut lit, mut shadowed, mut noise) = (Vec::new(), Vec::new(), Vec::new());
     let mut by_depth = vec![Vec::new(); FOG_DEPTHS_KM.len()];
     for &sun_elevation in &FOG_SUN_ELEVATIONS_DEG {
         for (k, &depth) in FOG_DEPTHS_KM.iter().enumerate() {
             for shadow in [false, true] {
                 let fog = Fog { max_distance_km: depth, ceiling_km: Some(entry.ceiling_km), shadowed: shadow };
-                let view = View { fog: Some(fog), ..View::directions(dirs.clone(), 90.0 - sun_elevation, altitude_m, spp, REFERENCE_SEED) };
-                let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render { sky: format!("{name} (fog reference)"), index: usize::MAX, source })?;
+                let view = View {
+                    fog: Some(fog),
+                    ..View::directions(dirs.clone(), 90.0 - sun_elevation, altitude_m, spp, REFERENCE_SEED)
+                };
+                let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render {
+                    sky: format!("{name} (fog reference)"),
+                    index: usize::MAX,
+                    source,
+                })?;
                 for (p, &(z, a)) in r.image.pixels.iter().zip(&dirs) {
                     let want = p.xyz[1];
                     if !(want > 0.0) {
@@ -78,7 +95,10 @@ pub fn verify_fog(luts: &Luts, name: &str, session: &Session, altitude_m: f64, s
                     }
                     noise.push(p.xyz_stderr[1] / want);
                     let occlusion = if shadow { 1.0 } else { 0.0 };
-                    let Some(got) = luts.fog_of_sky(name, sun_elevation, 0.0, direction_deg(z, a), depth, occlusion) else { continue };
+                    let Some(got) = luts.fog_of_sky(name, sun_elevation, 0.0, direction_deg(z, a), depth, occlusion)
+                    else {
+                        continue;
+                    };
                     let e = (y(got.inscatter_rgb) - want).abs() / want;
                     if shadow {
                         shadowed.push(e);
@@ -94,8 +114,10 @@ pub fn verify_fog(luts: &Luts, name: &str, session: &Session, altitude_m: f64, s
     let mut attenuation = Vec::new();
     for &elevation in &FOG_VIEW_ELEVATIONS_DEG {
         for &depth in &FOG_DEPTHS_KM {
-            let want = y(AttenuationTable::direct_rgb(&session.scene, &geometry, depth, elevation, &m));
-            let Some(got) = luts.fog_of_sky(name, 30.0, 0.0, direction_deg(90.0 - elevation, 0.0), depth, 0.0) else { continue };
+            let want = y(crate::bake::tables::direct_attenuation_rgb(&session.scene, &geometry, depth, elevation, &m));
+            let Some(got) = luts.fog_of_sky(name, 30.0, 0.0, direction_deg(90.0 - elevation, 0.0), depth, 0.0) else {
+                continue;
+            };
             if want > 1e-3 {
                 attenuation.push((y(got.attenuation_rgb) - want).abs() / want);
             }
