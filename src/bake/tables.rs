@@ -118,6 +118,18 @@ mod tests {
     use crate::mie::MieCache;
     use crate::render::{SpectralSettings, WavelengthSampling};
 
+    /// An atmosphere file of the repository, by its path from the root.
+    fn load(path: &str) -> Atmosphere {
+        Atmosphere::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(path)).unwrap()
+    }
+
+    /// The prepared scene of `atm` at hero-wavelength sampling in bands of `band_nm`, XYZ only.
+    fn hero_scene(atm: Atmosphere, band_nm: f64) -> Scene {
+        let spectral =
+            SpectralSettings { band_nm, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![], xyz: true };
+        Scene::new(&atm, &spectral, &MieCache::new(None), &|| {})
+    }
+
     fn geometry() -> FogGeometry {
         FogGeometry { planet_radius_km: 6371.0, observer_altitude_km: 0.0, ceiling_km: 3.0 }
     }
@@ -131,15 +143,7 @@ mod tests {
     /// goes red toward the horizon.
     #[test]
     fn the_table_decodes_the_column_tables_transmittance() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("atmospheres/clear.toml")).unwrap();
-        let spectral = SpectralSettings {
-            band_nm: 20.0,
-            wavelength_sampling: WavelengthSampling::Hero,
-            spectral_nm: Vec::new(),
-            xyz: true,
-        };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = hero_scene(load("atmospheres/clear.toml"), 20.0);
         let table = transmittance_table(&scene);
         let top_y = table.top_xyz[1];
         let mut worst: f64 = 0.0;
@@ -170,16 +174,9 @@ mod tests {
     /// steps, at sun zeniths up to 89°, from 0 and 5 km.
     #[test]
     fn the_column_tables_transmittance_matches_quadrature() {
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let mut atm = Atmosphere::load(&root.join("tests/atmospheres/disort_rayleigh.toml")).unwrap();
+        let mut atm = load("tests/atmospheres/disort_rayleigh.toml");
         atm.planet.geometry = crate::atmosphere::Geometry::Spherical;
-        let spectral = SpectralSettings {
-            band_nm: 40.0,
-            wavelength_sampling: WavelengthSampling::Hero,
-            spectral_nm: Vec::new(),
-            xyz: true,
-        };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = hero_scene(atm, 40.0);
         let (rad, top) = (scene.medium.radius_km, scene.medium.top_km);
         let o = &scene.band_optics[0];
         let sigma0: f64 = o.extinction[0] * scene.medium.density(0, 0.0);
@@ -212,18 +209,7 @@ mod tests {
     /// depth.
     #[test]
     fn the_attenuation_table_decodes_to_the_direct_transmittance() {
-        use crate::atmosphere::Atmosphere;
-        use crate::mie::MieCache;
-        use crate::render::{SpectralSettings, WavelengthSampling};
-        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-        let atm = Atmosphere::load(&root.join("atmospheres/hazed.toml")).unwrap();
-        let spectral = SpectralSettings {
-            band_nm: 40.0,
-            wavelength_sampling: WavelengthSampling::Hero,
-            spectral_nm: vec![],
-            xyz: true,
-        };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = hero_scene(load("atmospheres/hazed.toml"), 40.0);
         let g = geometry();
         let table = attenuation_table(&scene, g);
         let y = |xyz: [f64; 3]| xyz[1] / table.unattenuated_xyz[1];
