@@ -12,7 +12,12 @@ fn root() -> PathBuf {
 }
 
 fn sky(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sky")).args(args).current_dir(dir).env("SKY_CACHE_DIR", "off").output().unwrap()
+    Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(args)
+        .current_dir(dir)
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+        .output()
+        .unwrap()
 }
 
 /// A bake run with `--json-progress`: it succeeds, and these are its events.
@@ -197,7 +202,7 @@ fn a_bake_carries_the_fog_luts() {
     let basis = &bake.skies[0];
     let atm = sky::atmosphere::Atmosphere::load(&basis.atmosphere).unwrap();
     let spectral = sky::bake::run::spectral_settings(&basis.draft);
-    let scene = sky::render::Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
+    let scene = sky::render::Scene::new(&atm, &spectral, &sky::mie::MieCache::shared_by_tests(), &|| {});
     let m = luts.manifest.colour.rgb_from_xyz;
     let cancel = std::sync::atomic::AtomicBool::new(false);
     for index in [5, 30, 46] {
@@ -674,7 +679,7 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         ms_grid: None,
         fog_ms_size: None,
     });
-    let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::new(None), &|| {});
+    let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::shared_by_tests(), &|| {});
     let table = sky::bake::tables::transmittance_table(&scene);
     let m = sky::colour::ColourSpace::Rec709.xyz_to_rgb();
     let to_rgb = |x: [f64; 3]| sky::colour::apply(&m, x);
@@ -826,7 +831,7 @@ fn changing_one_atmosphere_rerenders_only_its_slices() {
 fn spawn_bake(bake: &Path, out: &Path, stderr: Stdio) -> std::process::Child {
     Command::new(env!("CARGO_BIN_EXE_sky"))
         .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
-        .env("SKY_CACHE_DIR", "off")
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
         .stdout(Stdio::null())
         .stderr(stderr)
         .spawn()

@@ -77,7 +77,7 @@ fn run(
             seed_base + case_index as u64,
             false,
         );
-        let cache = MieCache::new(None);
+        let cache = MieCache::shared_by_tests();
         let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let t0 = std::time::Instant::now();
         let img = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();

@@ -115,12 +115,16 @@ impl Farm {
             self.path("token").to_str().unwrap().to_string(),
         ]);
         args.extend(extra.iter().map(|s| s.to_string()));
-        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap()
+        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir()).output().unwrap()
     }
 
     /// The local render with the embedded worker, as reference.
     fn local(&self, out: &str) -> Vec<u8> {
-        let o = Command::new(SKY).args(render_args(&self.path(out))).env("SKY_CACHE_DIR", "off").output().unwrap();
+        let o = Command::new(SKY)
+            .args(render_args(&self.path(out)))
+            .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+            .output()
+            .unwrap();
         assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         std::fs::read(self.path(out)).unwrap()
     }
@@ -296,7 +300,7 @@ fn verification_catches_a_worker_with_wrong_results() {
     let render = Reap(Some(
         Command::new(SKY)
             .args(&args)
-            .env("SKY_CACHE_DIR", "off")
+            .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
@@ -442,7 +446,7 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
         "--token-file".into(),
         farm.path("wrong-token").to_str().unwrap().into(),
     ]);
-    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap();
+    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir()).output().unwrap();
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("refused the token"), "{}", stderr(&o));
     // The worker is still alive and serving after all that.
@@ -516,7 +520,7 @@ fn workers_speak_tls_when_given_a_certificate() {
     std::fs::write(farm.path("farm.toml"), farm_toml).unwrap();
     let mut args = render_args(&farm.path("farm.exr"));
     args.extend(["--farm".to_string(), farm.path("farm.toml").to_str().unwrap().to_string()]);
-    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").output().unwrap();
+    let o = Command::new(SKY).args(&args).env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir()).output().unwrap();
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(same_file(&local, &farm.path("farm.exr")));
     // Plain text to a TLS worker fails clearly, and the worker keeps serving.
@@ -672,8 +676,12 @@ fn schedule_and_owner_load_pause_a_worker() {
         "--token-file".to_string(),
         farm.path("token").to_str().unwrap().to_string(),
     ]);
-    let mut child =
-        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", "off").stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let mut child = Command::new(SKY)
+        .args(&args)
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
     let err = child.stderr.take().unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -771,7 +779,7 @@ fn a_bake_of_64_views_sends_each_worker_the_optics_once() {
         bundle,
         s.spectral.clone(),
         &OpticsCache::default(),
-        &sky::mie::MieCache::new(None),
+        &sky::mie::MieCache::shared_by_tests(),
         workers,
         opts,
         &|| {},
@@ -859,7 +867,7 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
     let (clear, clear_bundle, s) = clear_equirect(6, 3);
     let (hazed, hazed_bundle) =
         sky::atmosphere::Atmosphere::load_bundle(&root().join("atmospheres/hazed.toml")).unwrap();
-    let (optics, mie) = (OpticsCache::default(), sky::mie::MieCache::new(None));
+    let (optics, mie) = (OpticsCache::default(), sky::mie::MieCache::shared_by_tests());
     let sessions = [
         Session::on_farm(clear, clear_bundle, s.spectral.clone(), &optics, &mie, shared.clone(), &|| {}),
         Session::on_farm(hazed, hazed_bundle, s.spectral.clone(), &optics, &mie, shared.clone(), &|| {}),
@@ -933,7 +941,7 @@ fn a_task_without_optics_waits_for_optics_still_unpacking() {
         bundle,
         s.spectral.clone(),
         &OpticsCache::default(),
-        &sky::mie::MieCache::new(None),
+        &sky::mie::MieCache::shared_by_tests(),
         vec![],
         Default::default(),
         &|| {},
@@ -1008,7 +1016,7 @@ fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
                 "--json-progress",
             ])
             .args(farm_args)
-            .env("SKY_CACHE_DIR", "off")
+            .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
             .output()
             .unwrap();
         assert!(o.status.success(), "{}", stderr(&o));

@@ -26,7 +26,7 @@ fn root() -> PathBuf {
 
 fn scene(name: &str, spectral: &SpectralSettings) -> Scene {
     let atm = Atmosphere::load(&root().join(format!("atmospheres/{name}.toml"))).unwrap();
-    Scene::new(&atm, spectral, &MieCache::new(None), &|| {})
+    Scene::new(&atm, spectral, &MieCache::shared_by_tests(), &|| {})
 }
 
 /// The family-wise false-alarm rate of the tests below.

@@ -29,7 +29,7 @@ fn hero_agrees_with_single_band_at_47_nm_bands() {
     let atm = Atmosphere::load(&root().join("atmospheres/analytic-hg.toml")).unwrap();
     let dirs: Vec<(f64, f64)> =
         [0.0, 30.0, 60.0, 80.0].iter().flat_map(|&z| [0.0, 60.0, 120.0, 180.0].map(|a| (z, a))).collect();
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let run = |ws: WavelengthSampling, spp: u32, seed: u64| {
         let s = {
             let mut s_ = Settings::directions(dirs.clone(), 60.0, vec![], spp, seed, false);

@@ -22,7 +22,7 @@ fn openjd() -> PathBuf {
 }
 
 fn run(cmd: &mut Command) -> Output {
-    let o = cmd.env("SKY_CACHE_DIR", "off").output().unwrap();
+    let o = cmd.env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir()).output().unwrap();
     assert!(
         o.status.success(),
         "{:?} failed:\n{}\n{}",
@@ -92,7 +92,7 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
     std::fs::remove_file(first).unwrap();
     let again = tmp.path().join("again");
     let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
-        .env("SKY_CACHE_DIR", "off")
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(1));
@@ -116,7 +116,7 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
         }
     }
     let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
-        .env("SKY_CACHE_DIR", "off")
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(1));

@@ -191,7 +191,7 @@ fn solar_chromaticity_matches_colour_science() {
 #[test]
 fn rayleigh_optical_depth_matches_bodhaine_and_bucholtz() {
     let atm = Atmosphere::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml")).unwrap();
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     // Bodhaine et al. 1999, eq. 30; λ in µm.
     let bodhaine = |l_nm: f64| {
         let l = l_nm * 1e-3;
@@ -229,6 +229,6 @@ fn ozone_column_is_as_requested() {
     let col_m2 = o.scale * atm.profiles[o.profile].column_km(atm.planet.top_km) * 1000.0;
     assert!(rel(col_m2 / 2.6867e20, 345.0) < 1e-9);
     // Chappuis band: τ(603 nm) = σ · column ≈ 5.2e-21 cm² × 345 × 2.6867e16 cm⁻² ≈ 0.048.
-    let tau = optics::spectral_optics(&atm, 603.0, &MieCache::new(None)).absorber_optical_depth;
+    let tau = optics::spectral_optics(&atm, 603.0, &MieCache::shared_by_tests()).absorber_optical_depth;
     assert!((tau - 0.0483).abs() < 0.002, "{tau}");
 }

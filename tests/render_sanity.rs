@@ -30,7 +30,7 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 #[test]
 fn direct_beam_follows_beer_lambert() {
     let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let medium = Medium::new(&atm);
     for w in [400.0, 550.0, 700.0] {
         let spec = medium.spectral(&atm, w, 1.0, 0.0, &cache);
@@ -74,7 +74,7 @@ fn energy_is_conserved_with_a_white_ground() {
 
 fn conserves_energy(text: &str, n: u64) {
     let atm = Atmosphere::from_str(&root().join("tests/atmospheres/white.toml"), text).unwrap();
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let medium = Medium::new(&atm);
     let table = sky::render::medium::ColumnTable::new(&medium);
     let spec = medium.spectral(&atm, 450.0, 1.0, 1.0, &cache);
@@ -102,7 +102,7 @@ fn conserves_energy(text: &str, n: u64) {
 
 fn ground_radiance(atm: &Atmosphere, view: (f64, f64), sun_zenith: f64, spp: u32, seed: u64) -> (f64, f64) {
     let settings = Settings::directions(vec![view], sun_zenith, vec![550.0], spp, seed, false);
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let scene = Scene::new(atm, &settings.spectral, &cache, &|| {});
     let img = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
     (img.pixels[0].spectral[0], img.pixels[0].spectral_stderr[0])
@@ -159,7 +159,7 @@ fn renders_are_deterministic_across_threads_and_splits() {
             fog: None,
         },
     };
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
     let two = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
@@ -180,7 +180,7 @@ fn renders_are_deterministic_across_threads_and_splits() {
 fn column_table_matches_inspect_and_ratio_tracking() {
     use sky::render::medium::ColumnTable;
     let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let medium = Medium::new(&atm);
     let t0 = std::time::Instant::now();
     let table = ColumnTable::new(&medium);
@@ -233,7 +233,7 @@ fn adaptive_sampling_meets_its_target() {
             fog: None,
         },
     };
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
     let a = render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
     let lit: Vec<_> = a.pixels.iter().filter(|p| p.samples > 0).collect();
@@ -275,7 +275,7 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
         ("analytic-hg", 65.0, vec![(0.0, 0.0), (50.0, 90.0), (80.0, 10.0), (95.0, 0.0)], 6000),
         ("hazed", 94.0, vec![(60.0, 0.0), (82.0, 0.0), (86.0, 90.0)], 3000),
     ];
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     for (name, sun_zenith, dirs, spp) in cases {
         let atm = Atmosphere::load(&root().join(format!("atmospheres/{name}.toml"))).unwrap();
         let run = |ws: WavelengthSampling, seed: u64| {
@@ -333,7 +333,7 @@ fn hero_wavelengths_agree_with_single_band_sampling() {
 fn variance_reductions_are_unbiased() {
     use sky::render::guide::RayGuide;
     use sky::render::medium::ColumnTable;
-    let cache = MieCache::new(None);
+    let cache = MieCache::shared_by_tests();
     // (what is switched off, atmosphere, sun zenith, view, samples without, samples shipped)
     let cases = [
         ("guide", "clear", 94.0, (85.0, 0.0), 40_000u64, 10_000u64),

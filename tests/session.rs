@@ -22,7 +22,7 @@ fn a_session_prepares_optics_once_for_many_views() {
     s.spectral.band_nm = 47.0;
     s.view.camera = Camera::Fisheye;
     (s.view.width, s.view.height) = (6, 4);
-    let mie = MieCache::new(None);
+    let mie = MieCache::shared_by_tests();
     let cache = OpticsCache::default();
     let local = vec![WorkerSpec::Local { threads: 2 }];
     let session = Session::new(
@@ -86,7 +86,7 @@ fn job_bytes_per_view() {
         bundle,
         s.spectral.clone(),
         &OpticsCache::default(),
-        &MieCache::new(None),
+        &MieCache::shared_by_tests(),
         vec![],
         Options::default(),
         &|| {},
@@ -111,7 +111,7 @@ fn the_optics_cache_is_bounded_by_memory() {
     let (atm, _) = Atmosphere::load_bundle(&path).unwrap();
     let spectral = |nm: f64| Settings::directions(vec![], 40.0, vec![nm], 8, 3, false).spectral;
     let (a, b, c) = (spectral(450.0), spectral(550.0), spectral(650.0));
-    let mie = MieCache::new(None);
+    let mie = MieCache::shared_by_tests();
     // A budget smaller than any optics: only what is held stays.
     let cache = OpticsCache::with_budget(1);
     let held_a = cache.get(&atm, &a, &mie, &|| {});

@@ -359,7 +359,7 @@ mod tests {
             ms_grid: None,
             fog_ms_size: None,
         });
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let cancel = AtomicBool::new(false);
         let dirs = vec![(30.0, 0.0), (60.0, 90.0), (88.0, 180.0), (90.0, 10.0), (93.0, 0.0), (120.0, 45.0)];
         for sun_zenith_deg in [40.0, 86.0] {

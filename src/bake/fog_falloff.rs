@@ -162,7 +162,7 @@ mod tests {
             spectral_nm: vec![],
             xyz: true,
         };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let g = FogGeometry { planet_radius_km: scene.medium.radius_km, observer_altitude_km: 0.0, ceiling_km: 3.0 };
         let s = study(&scene, g, &[60.0], 16, 1, &AtomicBool::new(false), &|| {}).unwrap();
         eprintln!("{:?}: fit {:?}, depth-free {:?}", s.falloff, s.fit_error, s.depth_free_error);

@@ -105,7 +105,7 @@ pub(super) mod tests {
     pub(in crate::bake) fn test_sky(width: usize, height: usize, sampling: &Sampling) -> (Atmosphere, Scene, BasisSky) {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/atmospheres/disort_rayleigh_hg.toml");
         let atm = Atmosphere::load(&path).unwrap();
-        let scene = Scene::new(&atm, &spectral_settings(sampling), &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral_settings(sampling), &MieCache::shared_by_tests(), &|| {});
         let sky = BasisSky {
             name: "t".into(),
             atmosphere: path,

@@ -127,7 +127,7 @@ mod tests {
     fn hero_scene(atm: Atmosphere, band_nm: f64) -> Scene {
         let spectral =
             SpectralSettings { band_nm, wavelength_sampling: WavelengthSampling::Hero, spectral_nm: vec![], xyz: true };
-        Scene::new(&atm, &spectral, &MieCache::new(None), &|| {})
+        Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {})
     }
 
     fn geometry() -> FogGeometry {

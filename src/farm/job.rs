@@ -201,7 +201,7 @@ mod tests {
         let mut s = Settings::directions(vec![(10.0, 20.0)], 60.0, vec![550.0], 4, 7, false);
         s.spectral.xyz = true;
         s.spectral.band_nm = 20.0;
-        let scene = Arc::new(Scene::new(&atm, &s.spectral, &crate::mie::MieCache::new(None), &|| {}));
+        let scene = Arc::new(Scene::new(&atm, &s.spectral, &crate::mie::MieCache::shared_by_tests(), &|| {}));
         let optics = Arc::new(Optics::new(&atm, bundle, scene.clone()));
         let o = optics.message();
         assert_eq!(o.scene.len() as u64, scene.encoded_bytes());

@@ -36,6 +36,24 @@ impl MieCache {
         }
     }
 
+    /// The cache the test suites share: one folder in the system's
+    /// temporary directory per renderer source ([`crate::RENDER_SOURCE`],
+    /// which hashes `src/mie` among the rest), so a changed Mie or column
+    /// code starts from an empty one. The droplets' optics take about two
+    /// core-minutes to compute and the aerosols' one; without it every
+    /// test that loads a cloudy or hazed atmosphere paid that again.
+    #[doc(hidden)]
+    pub fn shared_by_tests() -> MieCache {
+        MieCache::new(Some(Self::test_dir()))
+    }
+
+    /// The folder of [`MieCache::shared_by_tests`], for `SKY_CACHE_DIR` of
+    /// the command lines the tests run.
+    #[doc(hidden)]
+    pub fn test_dir() -> PathBuf {
+        std::env::temp_dir().join(format!("sky-test-cache-{}", crate::RENDER_SOURCE))
+    }
+
     pub fn dir(&self) -> Option<&Path> {
         self.dir.as_deref()
     }

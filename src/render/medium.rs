@@ -328,7 +328,7 @@ mod tests {
                 m.shell_edges_km
             );
         }
-        let sp = m.spectral(&atm, 550.0, 1.0, 0.1, &MieCache::new(None));
+        let sp = m.spectral(&atm, 550.0, 1.0, 0.1, &MieCache::shared_by_tests());
         let mut worst = (0.0f64, 0);
         for s in 0..m.shells() {
             let (a, b) = (m.shell_edges_km[s], m.shell_edges_km[s + 1]);

@@ -293,7 +293,7 @@ mod tests {
             spectral_nm: vec![l],
             xyz: false,
         };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let sun = direction_deg(sun_zenith_deg, 0.0);
         let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
         // τ* = σ(λ) n₀ H (1 − e^(−top/H)), σ in cm² → m².
@@ -332,7 +332,7 @@ mod tests {
             spectral_nm: vec![l],
             xyz: false,
         };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let sun_zenith_deg = 70.0;
         let sun = direction_deg(sun_zenith_deg, 0.0);
         let ss = SingleScattering::new(&scene.medium, &scene.columns, &scene.line_optics, sun, 0.0);
@@ -405,7 +405,7 @@ mod tests {
                 spectral_nm: vec![550.0],
                 xyz: false,
             };
-            let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+            let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
             let (m, e) = (&scene.medium, &scene.line_optics[0].extinction);
             let sun = direction_deg(40.0, 0.0);
             let column =
@@ -541,7 +541,7 @@ mod tests {
                 spectral_nm: vec![550.0],
                 xyz: false,
             };
-            let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+            let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
             let sun = direction_deg(sun_zenith_deg, 0.0);
             let sp = &scene.line_optics[0];
             let make = |skip: bool| {

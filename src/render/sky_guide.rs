@@ -174,7 +174,7 @@ mod tests {
             spectral_nm: vec![550.0],
             xyz: false,
         };
-        let scene = Scene::new(&atm, &spectral, &MieCache::new(None), &|| {});
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let t = Tracer::new(&scene.medium, &scene.line_optics[0], direction_deg(96.0, 30.0), 0.533, Estimator::Full)
             .with_columns(&scene.columns);
         let g = SkylightGuide::build(&t).expect("a twilight guide");
@@ -226,7 +226,7 @@ mod tests {
             spectral_nm: vec![550.0],
             xyz: false,
         };
-        Scene::new(&atm, &spectral, &MieCache::new(None), &|| {})
+        Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {})
     }
 
     /// The line's tracer of the sky without the sun's disk and without
