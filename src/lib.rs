@@ -43,6 +43,7 @@ pub mod spectrum;
 pub mod stats;
 pub mod study;
 pub mod table;
+pub mod transport;
 
 /// Version of this build, recorded in outputs.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

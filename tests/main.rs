@@ -20,3 +20,4 @@ mod preview_clouds;
 mod reference_physics;
 mod render_sanity;
 mod session;
+mod transport;
