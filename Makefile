@@ -24,18 +24,15 @@ build:
 # openjd`) and fails without it.
 # tests/ktx_readers.rs reads our KTX2 files with npm's ktx-parse (pinned in
 # tests/ktx_parse/package-lock.json; needs node and npm) and fails without it.
-# The farm's tests kill, stall and corrupt workers through hidden flags that
-# exist only with the test-only `fault-injection` feature (a plain `cargo
-# test` runs without it and reports those tests ignored). Only the sky
-# crate is rebuilt with it, and rebuilt without it afterwards, so that
-# target/release/sky is a user's build again.
+# The farm's tests kill, stall and corrupt workers through hidden
+# `--fault-*` flags that work only under SKY_FAULT_INJECTION=1, so the
+# tests share the release build of `make build` (the crate compiles once).
 # tests/preview.rs runs the GPU preview on Mesa's lavapipe (a Vulkan driver
 # on the CPU; `make lavapipe`) through Vulkan only: on wgpu's GL fallback
 # formats go missing and arrays read back as zeros, so a missing driver
 # must fail, not fall back.
 test: build ktx-parse openjd lavapipe cxx
-	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(CARGO) test --release --locked --features fault-injection,preview
-	$(CARGO) build --release --locked --features preview
+	WGPU_BACKEND=vulkan NODEVICE_SELECT=1 $(CARGO) test --release --locked --features preview
 
 # The GPU preview's golden pictures (tests/golden/, see its README) drawn
 # again by the current build: only for a change meant to alter them.

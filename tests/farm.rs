@@ -89,6 +89,7 @@ impl Farm {
             .arg(self.path("token"))
             .args(flags)
             .env("SKY_CACHE_DIR", "off")
+            .env("SKY_FAULT_INJECTION", "1")
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -115,7 +116,12 @@ impl Farm {
             self.path("token").to_str().unwrap().to_string(),
         ]);
         args.extend(extra.iter().map(|s| s.to_string()));
-        Command::new(SKY).args(&args).env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir()).output().unwrap()
+        Command::new(SKY)
+            .args(&args)
+            .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+            .env("SKY_FAULT_INJECTION", "1")
+            .output()
+            .unwrap()
     }
 
     /// The local render with the embedded worker, as reference.
@@ -183,10 +189,6 @@ fn three_workers_render_bit_identically_to_a_local_render() {
 }
 
 #[test]
-#[cfg_attr(
-    not(feature = "fault-injection"),
-    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
-)]
 fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
     let mut farm = Farm::new();
     let local = farm.local("local.exr");
@@ -219,10 +221,6 @@ fn killed_stalled_and_garbage_workers_do_not_change_the_result() {
 }
 
 #[test]
-#[cfg_attr(
-    not(feature = "fault-injection"),
-    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
-)]
 fn a_killed_coordinator_resumes_without_rendering_twice() {
     let mut farm = Farm::new();
     let local = farm.local("local.exr");
@@ -268,10 +266,6 @@ impl Drop for Reap {
 }
 
 #[test]
-#[cfg_attr(
-    not(feature = "fault-injection"),
-    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
-)]
 fn verification_catches_a_worker_with_wrong_results() {
     use proto::{ControlAction, ControlRequest};
     let mut farm = Farm::new();
@@ -458,10 +452,6 @@ fn bad_calls_get_clear_errors_and_workers_keep_serving() {
 /// A coordinator refuses a worker of another protocol (one that claims 99),
 /// with a message naming both versions, and writes nothing.
 #[test]
-#[cfg_attr(
-    not(feature = "fault-injection"),
-    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
-)]
 fn a_worker_of_another_protocol_is_refused() {
     let mut farm = Farm::new();
     let old = farm.start("old", &["--fault-protocol", "99"]);
@@ -927,10 +917,6 @@ fn two_atmospheres_render_in_one_queue_on_one_farm() {
 /// above on a loaded CI machine), and Hello counts them as held. The worker
 /// takes 3 s more to unpack (a fault), so both calls land while it does.
 #[test]
-#[cfg_attr(
-    not(feature = "fault-injection"),
-    ignore = "needs the test-only fault-injection feature: make test, or cargo test --features fault-injection"
-)]
 fn a_task_without_optics_waits_for_optics_still_unpacking() {
     use sky::session::{OpticsCache, Session};
     let mut farm = Farm::new();

@@ -91,6 +91,18 @@ pub fn usage<T>(msg: impl Into<String>) -> anyhow::Result<T> {
     Err(UsageError(msg.into()).into())
 }
 
+/// The hidden `--fault-*` flags make a worker or coordinator misbehave on
+/// purpose for the farm's own tests (tests/farm.rs). They are refused unless
+/// `SKY_FAULT_INJECTION=1` is set, so that a stray flag in a user's script
+/// cannot corrupt a render; a corrupting worker is caught by the farm's
+/// verification either way.
+pub fn faults_allowed(any_fault_flag: bool) -> anyhow::Result<()> {
+    if any_fault_flag && std::env::var_os("SKY_FAULT_INJECTION").is_none_or(|v| v != "1") {
+        return usage("the --fault-* flags are for the farm's own tests and need SKY_FAULT_INJECTION=1");
+    }
+    Ok(())
+}
+
 /// What a failed write to stdout does (see `outln!`).
 pub fn stdout_failed(e: std::io::Error) -> ! {
     if e.kind() == std::io::ErrorKind::BrokenPipe {

@@ -169,7 +169,6 @@ pub struct RenderArgs {
     #[arg(long, help_heading = "Farm")]
     json_progress: bool,
     /// Fault injection for the farm's tests: SIGKILL this coordinator once N columns are journaled
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_kill_after_columns: Option<u32>,
 }
@@ -287,6 +286,7 @@ fn check(a: &RenderArgs) -> Result<Checked> {
 
 /// The flags' own ranges and combinations.
 fn check_flags(a: &RenderArgs) -> Result<()> {
+    super::faults_allowed(a.fault_kill_after_columns.is_some())?;
     if let Some(e) = a.max_rel_error {
         if !(e > 0.0 && e < 1.0) {
             return usage(format!("--max-rel-error must be between 0 and 1, got {e}"));
@@ -415,10 +415,7 @@ fn farm_options(
     let style = super::progress::Style::choose(a.json_progress);
     let view = super::progress::View::new(style);
     opts.events = Some(view.sink.clone());
-    #[cfg(feature = "fault-injection")]
-    {
-        opts.faults.kill_after_columns = a.fault_kill_after_columns;
-    }
+    opts.faults.kill_after_columns = a.fault_kill_after_columns;
     ((workers, opts), style, view)
 }
 

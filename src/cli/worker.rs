@@ -51,27 +51,21 @@ pub struct WorkerArgs {
     #[arg(long, default_value_t = sky::lru::DEFAULT_BUDGET_BYTES >> 20, value_parser = clap::value_parser!(u64).range(1..))]
     optics_cache_mib: u64,
     /// Fault injection for the farm's tests: stall forever after N tasks
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_stall_after: Option<u64>,
     /// Fault injection: send tiles containing NaN
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_corrupt: bool,
     /// Fault injection: send tiles off by one ulp
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_perturb: bool,
     /// Fault injection: claim another protocol version
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_protocol: Option<u32>,
     /// Fault injection: SIGKILL itself during task N (from 0)
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_sigkill_on_task: Option<u64>,
     /// Fault injection: take this many milliseconds more to unpack optics
-    #[cfg(feature = "fault-injection")]
     #[arg(long, hide = true)]
     fault_slow_unpack_ms: Option<u64>,
 }
@@ -149,6 +143,14 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
             return usage(format!("--listen {}: expected HOST:PORT with a numeric host, e.g. 0.0.0.0:7878", a.listen))
         }
     };
+    super::faults_allowed(
+        a.fault_stall_after.is_some()
+            || a.fault_corrupt
+            || a.fault_perturb
+            || a.fault_protocol.is_some()
+            || a.fault_sigkill_on_task.is_some()
+            || a.fault_slow_unpack_ms.is_some(),
+    )?;
     if !(a.owner_load_limit > 0.0 && a.owner_load_limit <= 1.0) {
         return usage(format!("--owner-load-limit must be in (0, 1], got {}", a.owner_load_limit));
     }
@@ -203,7 +205,6 @@ pub fn run(a: WorkerArgs) -> Result<ExitCode> {
         cache,
         optics_budget: a.optics_cache_mib << 20,
         log,
-        #[cfg(feature = "fault-injection")]
         faults: sky::farm::faults::WorkerFaults {
             stall_after_tasks: a.fault_stall_after,
             corrupt_tiles: a.fault_corrupt,

@@ -86,7 +86,6 @@ pub struct Options {
     /// How often progress is reported.
     pub progress_period: Duration,
     /// Faults to commit, for the farm's tests.
-    #[cfg(feature = "fault-injection")]
     pub faults: super::faults::CoordinatorFaults,
 }
 
@@ -103,7 +102,6 @@ impl Default for Options {
             tls: None,
             events: None,
             progress_period: Duration::from_secs(1),
-            #[cfg(feature = "fault-injection")]
             faults: Default::default(),
         }
     }
@@ -371,7 +369,6 @@ async fn drive(
                     match result {
                         Ok(cols) => {
                             s.finish(w, t.id, cols, shared.now());
-                            #[cfg(feature = "fault-injection")]
                             opts.faults.accepted(s.columns_done());
                         }
                         Err(e) => {

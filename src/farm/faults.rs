@@ -1,10 +1,11 @@
 //! Fault injection for the farm's own tests (tests/farm.rs): workers that
 //! SIGKILL themselves mid-task, stall, send NaN or subtly wrong tiles or
 //! claim another protocol, and a coordinator that SIGKILLs itself after a
-//! number of journaled columns. Compiled only with the `fault-injection`
-//! cargo feature, which `make test` turns on and a user's build lacks: the
-//! hidden `--fault-*` flags of `sky worker` and `sky render` exist only
-//! with it, and no code path a user runs reaches these hooks.
+//! number of journaled columns. The hidden `--fault-*` flags of `sky
+//! worker` and `sky render` that set them are refused unless
+//! `SKY_FAULT_INJECTION=1` is set (`cli::faults_allowed`); without them no
+//! hook fires. They are compiled into every build so that `make test` shares
+//! the user's release build instead of compiling the crate twice.
 
 use std::time::Duration;
 

@@ -22,7 +22,6 @@
 pub mod config;
 pub mod coordinator;
 pub mod events;
-#[cfg(feature = "fault-injection")]
 pub mod faults;
 pub mod job;
 pub mod journal;

@@ -42,7 +42,7 @@ pub enum WorkerEvent {
         peer: String,
         message: String,
     },
-    /// A test fault was committed (only with the `fault-injection` feature).
+    /// A test fault was committed (only under `SKY_FAULT_INJECTION=1`).
     Fault {
         what: String,
     },
@@ -105,7 +105,6 @@ pub struct Config {
     /// Where the worker's events go (the CLI prints them).
     pub log: Log,
     /// Faults to commit, for the farm's tests.
-    #[cfg(feature = "fault-injection")]
     pub faults: super::faults::WorkerFaults,
 }
 
@@ -183,7 +182,6 @@ impl Shared {
     }
 
     fn protocol_version(&self) -> u32 {
-        #[cfg(feature = "fault-injection")]
         if let Some(v) = self.config.faults.protocol_version {
             return v;
         }
@@ -305,7 +303,6 @@ impl Worker for Service {
             return Err(super::protocol::paused_status(&reason));
         }
         let _started = s.tasks_started.fetch_add(1, Ordering::Relaxed);
-        #[cfg(feature = "fault-injection")]
         if s.config.faults.stalls(_started) {
             (s.config.log)(&WorkerEvent::Fault { what: format!("stalling on task {}", task.task_id) });
             return Ok(Response::new(Box::pin(tokio_stream::pending())));
@@ -317,7 +314,6 @@ impl Worker for Service {
         let Some(optics) = s.optics_for(&task.optics_hash, task.optics.take()) else {
             return Err(super::protocol::optics_missing_status(&task.optics_hash));
         };
-        #[cfg(feature = "fault-injection")]
         if s.config.faults.sigkill_on_task == Some(_started) {
             (s.config.log)(&WorkerEvent::Fault { what: "killing itself mid-task".into() });
             s.config.faults.maybe_kill_during(_started);
@@ -417,7 +413,6 @@ fn unpack(s: &Arc<Shared>, o: proto::Optics, hash: String, done: watch::Sender<O
         }
         let _unlist = Unlist(&shared, &hash);
         let result = (|| {
-            #[cfg(feature = "fault-injection")]
             shared.config.faults.unpacking();
             let (atm, spectral, scene) = open_optics(&o, &hash)?;
             let (scene, bytes) = match scene {
@@ -496,7 +491,6 @@ async fn run_task(
     };
     #[allow(unused_mut)]
     let mut t = tile::encode(&task.job_hash, task.task_id, task.first_column, height, lines, &columns);
-    #[cfg(feature = "fault-injection")]
     s.config.faults.spoil(&mut t);
     s.tasks_done.fetch_add(1, Ordering::Relaxed);
     s.columns_done.fetch_add(count as u64, Ordering::Relaxed);

@@ -91,7 +91,6 @@ impl Sched {
 
     /// Columns accepted so far, resumed ones included (what the test-only
     /// coordinator faults count).
-    #[cfg_attr(not(feature = "fault-injection"), allow(dead_code))]
     pub fn columns_done(&self) -> u32 {
         self.stats.columns_resumed + self.stats.columns_rendered
     }
