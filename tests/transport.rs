@@ -7,13 +7,17 @@
 //! No noise on either side, so the bound is plain: every view more than 5°
 //! from the sun within 0.5 % (issue 37).
 
+use crate::common::Family;
 use serde_json::Value;
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
 use sky::render::medium::Medium;
+use sky::render::{Scene, Settings, SpectralSettings, WavelengthSampling};
+use sky::transport::adding::{ground_radiance, View};
 use sky::transport::layers::{Grading, Layers};
-use sky::transport::plane_parallel::{ground_radiance, View};
+use sky::transport::render::{render, Resolution};
 use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
@@ -77,4 +81,166 @@ fn plane_parallel_skies_match_disort_beyond_5_degrees_of_the_sun() {
     let clear = worst_against("tests/reference/disort.json", 16, &grading);
     let clouds = worst_against("tests/reference/disort_clouds.json", 32, &grading);
     assert!(clear < 0.005 && clouds < 0.005, "worst relative error: clear slabs {clear:e}, clouds {clouds:e}");
+}
+
+/// `sky render --method deterministic`'s pixels (the render's spectral
+/// lines, its single scattering by the path tracer's own quadrature, the
+/// diffuse light interpolated on the view grid) against DISORT in the clear
+/// and hazed slabs: every view beyond 5° of the sun within 0.5 %.
+#[test]
+fn deterministic_renders_match_disort_beyond_5_degrees_of_the_sun() {
+    let r: Value =
+        serde_json::from_str(&std::fs::read_to_string(root().join("tests/reference/disort.json")).unwrap()).unwrap();
+    let cache = MieCache::shared_by_tests();
+    let mut worst = (0.0f64, String::new());
+    for case in r["cases"].as_array().unwrap() {
+        let atm = Atmosphere::load(&root().join(case["atmosphere"].as_str().unwrap())).unwrap();
+        let nm = case["wavelength_nm"].as_f64().unwrap();
+        let sun_zenith_deg = case["sun_zenith_deg"].as_f64().unwrap();
+        let zen: Vec<f64> = case["view_zenith_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let az: Vec<f64> =
+            case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let (mut dirs, mut want) = (Vec::new(), Vec::new());
+        for (i, z) in zen.iter().enumerate() {
+            for (j, a) in az.iter().enumerate() {
+                let d = sky::directions::camera::direction_deg(*z, *a);
+                let sun = sky::directions::camera::direction_deg(sun_zenith_deg, 0.0);
+                if d.dot(sun).clamp(-1.0, 1.0).acos().to_degrees() > 5.0 {
+                    dirs.push((*z, *a));
+                    want.push(case["radiance_sr_inv"][i][j].as_f64().unwrap());
+                }
+            }
+        }
+        let settings = Settings::directions(dirs.clone(), sun_zenith_deg, vec![nm], 1, 1, false);
+        let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
+        let image = render(&scene, &settings.view, &Resolution::default(), &|| {}).unwrap();
+        let e_sun = atm.sun.irradiance_w_m2_nm.eval(nm);
+        for ((p, w), d) in image.pixels.iter().zip(&want).zip(&dirs) {
+            assert_eq!(p.spectral_stderr, vec![0.0]);
+            let rel = (p.spectral[0] / e_sun - w).abs() / w;
+            if rel > worst.0 {
+                worst =
+                    (rel, format!("{} {nm} nm view {d:?}: {:.5e} against {w:.5e}", atm.name, p.spectral[0] / e_sun));
+            }
+        }
+    }
+    eprintln!("worst: {:.3} % ({})", 100.0 * worst.0, worst.1);
+    assert!(worst.0 < 0.005, "{worst:?}");
+}
+
+/// The deterministic render against the path tracer, in XYZ: views from
+/// the zenith to 85° at three azimuths, the sun's own direction (its disk
+/// on) and the ground. Each difference in units of the path tracer's
+/// standard error goes into `family`; the largest relative difference is
+/// returned.
+fn agree_in_xyz(atmosphere: &str, sun_zenith_deg: f64, spp: u32, seed: u64, family: &mut Family) -> f64 {
+    let atm = Atmosphere::load(&root().join(atmosphere)).unwrap();
+    let mut dirs = vec![(sun_zenith_deg, 0.0), (120.0, 30.0)];
+    for z in [0.0, 30.0, 60.0, 75.0, 85.0] {
+        for a in [20.0, 90.0, 180.0] {
+            dirs.push((z, a));
+        }
+    }
+    let mut settings = Settings::directions(dirs.clone(), sun_zenith_deg, vec![], spp, seed, true);
+    settings.spectral = SpectralSettings {
+        band_nm: 10.0,
+        wavelength_sampling: WavelengthSampling::Hero,
+        spectral_nm: vec![],
+        xyz: true,
+    };
+    let scene = Scene::new(&atm, &settings.spectral, &MieCache::shared_by_tests(), &|| {});
+    let mc = sky::render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
+    let det = render(&scene, &settings.view, &Resolution::default(), &|| {}).unwrap();
+    let mut worst = 0.0f64;
+    for ((m, d), dir) in mc.pixels.iter().zip(&det.pixels).zip(&dirs) {
+        for c in 0..3 {
+            let z = (d.xyz[c] - m.xyz[c]) / m.xyz_stderr[c];
+            let rel = d.xyz[c] / m.xyz[c] - 1.0;
+            let label = format!(
+                "{} sun {sun_zenith_deg}, view {dir:?} channel {c}: deterministic {:.5e}, path tracer {:.5e} ± {:.1e} ({:+.2} %)",
+                atm.name,
+                d.xyz[c],
+                m.xyz[c],
+                m.xyz_stderr[c],
+                100.0 * rel
+            );
+            eprintln!("{label}: z {z:+.2}");
+            family.push(label, z);
+            worst = worst.max(rel.abs());
+        }
+        assert_eq!(d.xyz_stderr, [0.0; 3]);
+    }
+    worst
+}
+
+/// The deterministic render against the path tracer in the hazed slab
+/// (plane-parallel, sun at 50°) and, pseudo-spherical, in the clear and
+/// hazed basis atmospheres (suns at 60° and 80°): every z-score against
+/// the Šidák threshold of the family at a false-alarm rate of 1 %, with
+/// the aggregate Σz/√m against a bias common to all (`stats::Family`).
+#[test]
+fn deterministic_and_monte_carlo_renders_agree_in_xyz() {
+    let mut family = Family::default();
+    for (atmosphere, sun, seed) in [
+        ("tests/atmospheres/disort_rayleigh_hg.toml", 50.0, 37),
+        ("atmospheres/clear.toml", 60.0, 38),
+        ("atmospheres/hazed.toml", 80.0, 39),
+    ] {
+        let worst = agree_in_xyz(atmosphere, sun, 4096, seed, &mut family);
+        eprintln!("{atmosphere}, sun {sun}: largest difference {:.2} %", 100.0 * worst);
+    }
+    let failures = family.failures(0.01);
+    assert!(failures.is_empty(), "{failures:#?}");
+}
+
+/// The command line: `--method deterministic` renders a plane-parallel
+/// atmosphere to the same outputs (zero standard errors, the method in the
+/// JSON and the EXR's metadata) and refuses what it cannot render yet with
+/// a usage error that says why, before any work.
+#[test]
+fn the_method_flag_renders_or_says_why_not() {
+    let dir = tempfile::tempdir().unwrap();
+    let sky = |args: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_sky"))
+            .args(args)
+            .current_dir(root())
+            .env("SKY_CACHE_DIR", MieCache::test_dir())
+            .output()
+            .unwrap()
+    };
+    let exr = dir.path().join("pp.exr");
+    let o = sky(&[
+        "render",
+        "tests/atmospheres/disort_rayleigh_hg.toml",
+        "--method",
+        "deterministic",
+        "--sun-zenith-deg",
+        "40",
+        "--size",
+        "24x12",
+        "--camera",
+        "equirect",
+        "--band-nm",
+        "20",
+        "--out",
+        exr.to_str().unwrap(),
+        "--json",
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["method"], "deterministic (16 streams a hemisphere)");
+    assert_eq!(v["y_relative_stderr"]["median"], 0.0, "{v}");
+    let bytes = std::fs::read(&exr).unwrap();
+    assert!(bytes.windows(13).any(|w| w == b"deterministic"), "the EXR's metadata names the method");
+    for (args, says) in [
+        (&["atmospheres/clear.toml", "--sun-zenith-deg", "95"][..], "twilight"),
+        (&["tests/atmospheres/disort_rayleigh_hg.toml", "--sun-zenith-deg", "40", "--altitude-m", "500"][..], "ground"),
+        (&["tests/atmospheres/disort_rayleigh_hg.toml", "--sun-zenith-deg", "40", "--denoise"][..], "--denoise"),
+    ] {
+        let o = sky(&[&["render", "--method", "deterministic", "--size", "4x4", "--json"][..], args].concat());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: {err}");
+    }
 }

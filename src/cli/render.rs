@@ -50,6 +50,15 @@ enum SingleArg {
     MonteCarlo,
 }
 
+/// How `sky render` computes the light.
+#[derive(Clone, Copy, PartialEq, clap::ValueEnum)]
+enum Method {
+    /// The path tracer: the project's referee, noise with a standard error per pixel
+    MonteCarlo,
+    /// The transport solver: no noise (zero standard errors); from the ground, suns above the horizon, no fog so far
+    Deterministic,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum Sampling {
     Luminance,
@@ -154,6 +163,12 @@ pub struct RenderArgs {
     /// With --fog-distance-km: the Shadowed Fog, without the sunlight scattered once toward the camera
     #[arg(long, requires = "fog_distance_km")]
     shadowed_fog: bool,
+    /// How the light is computed: monte-carlo (the path tracer) or deterministic (the transport solver, no noise; --spp, --seed and --max-rel-error do not apply)
+    #[arg(long, value_enum, default_value = "monte-carlo")]
+    method: Method,
+    /// Discrete-ordinate streams a hemisphere for --method deterministic: 16 agree with DISORT within 0.25 % in clear and hazed air, cloud layers want 32
+    #[arg(long, default_value_t = 16, value_parser = clap::value_parser!(u32).range(2..=128))]
+    streams: u32,
     #[command(flatten)]
     farm: super::farm_args::FarmArgs,
     /// Render this fraction of the columns a second time on another worker and compare bit for bit
@@ -222,6 +237,12 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         .threads
         .filter(|&t| t > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
+    if a.method == Method::Deterministic {
+        if let Err(e) = sky::transport::render::check(atm.planet.geometry, &settings.view) {
+            return usage(format!("--method deterministic: {e}"));
+        }
+        return run_deterministic(&a, &outputs, threads, (atm, bundle), &settings);
+    }
     let start = Instant::now();
     let (farm, style, view) = farm_options(&a, plan, threads);
     let session = prepare_session(threads, atm, bundle, &settings, farm, style, start)?;
@@ -254,6 +275,41 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
     super::render_output::finish(&outputs, &settings, atm, rendered, prep_s, t0, journal_path)
 }
 
+/// `--method deterministic`: the transport solver on the local cores; no
+/// farm, no journal, the same outputs.
+fn run_deterministic(
+    a: &RenderArgs,
+    outputs: &Outputs,
+    threads: usize,
+    (atm, bundle): (Atmosphere, Bundle),
+    settings: &Settings,
+) -> Result<ExitCode> {
+    let start = Instant::now();
+    let style = super::progress::Style::choose(a.json_progress);
+    let local = (vec![WorkerSpec::Local { threads }], Options::default());
+    let session = prepare_session(threads, atm, bundle, settings, local, style, start)?;
+    let prep_s = start.elapsed().as_secs_f64();
+    let resolution = sky::transport::render::Resolution { streams: a.streams as usize, ..Default::default() };
+    let steps = session.scene.band_optics.len() + session.scene.line_optics.len();
+    let bar = ProgressBar::new(steps as u64);
+    bar.set_style(
+        ProgressStyle::with_template("solving [{bar:30}] {pos}/{len} wavelengths, eta {eta}")
+            .unwrap()
+            .progress_chars("=> "),
+    );
+    if style == super::progress::Style::Lines {
+        eprintln!("sky render: solving the transport at {steps} wavelengths ({} streams a hemisphere)", a.streams);
+    }
+    let t0 = Instant::now();
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let image = pool
+        .install(|| sky::transport::render::render(&session.scene, &settings.view, &resolution, &|| bar.inc(1)))
+        .map_err(|e| super::UsageError(format!("--method deterministic: {e}")))?;
+    bar.finish_and_clear();
+    let rendered = sky::session::Rendered { image, stats: Default::default() };
+    super::render_output::finish(outputs, settings, &session.atmosphere, rendered, prep_s, t0, None)
+}
+
 /// Checks the flags (in the order the command always has, so that the same
 /// mistake gets the same message) and works out the camera and the farm plan.
 fn check(a: &RenderArgs) -> Result<Checked> {
@@ -269,6 +325,12 @@ fn check(a: &RenderArgs) -> Result<Checked> {
             return usage(format!("--lease-s must be a positive number of seconds, got {l}"));
         }
     }
+    if a.method == Method::Deterministic {
+        let farm = !a.farm.workers.is_empty() || a.farm.farm.is_some();
+        if farm || a.resume || a.denoise {
+            return usage("--method deterministic renders on the local cores in one go: no --workers, --farm, --resume or --denoise");
+        }
+    }
     if a.resume && a.out.is_none() {
         return usage("--resume continues OUT.exr.journal and needs --out");
     }
@@ -280,6 +342,10 @@ fn check(a: &RenderArgs) -> Result<Checked> {
         json: a.json,
         json_progress: a.json_progress,
         denoise: a.denoise,
+        method: match a.method {
+            Method::MonteCarlo => "monte-carlo".to_string(),
+            Method::Deterministic => format!("deterministic ({} streams a hemisphere)", a.streams),
+        },
     };
     Ok(Checked { camera, width, height, plan, outputs })
 }

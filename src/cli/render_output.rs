@@ -27,6 +27,8 @@ pub(super) struct Outputs {
     pub json_progress: bool,
     /// --denoise
     pub denoise: bool,
+    /// --method (and --streams), as the outputs record it
+    pub method: String,
 }
 
 /// Writes the outputs of a finished render (its journal, at
@@ -71,6 +73,7 @@ pub(super) fn finish(
         let mut v = json!({
             "atmosphere": atm.path.display().to_string(),
             "atmosphere_hash": atm.content_hash,
+            "method": a.method,
             "width": width, "height": height, "spp": settings.view.spp, "seed": settings.view.seed,
             "mean_samples_per_pixel": taken / n as f64,
             "sun_zenith_deg": settings.view.sun_zenith_deg, "sun_azimuth_deg": settings.view.sun_azimuth_deg,
@@ -95,6 +98,8 @@ pub(super) fn finish(
         outln!("{}", serde_json::to_string_pretty(&v)?);
     } else if a.json_progress {
         outln!("{}", json!({"event": "done", "render_seconds": render_s, "farm": farm_stats}));
+    } else if a.method != "monte-carlo" {
+        eprintln!("rendered {width}x{height} by the {} solver in {render_s:.1} s (optics {prep_s:.1} s)", a.method);
     } else {
         eprintln!(
             "rendered {}x{} at {:.1} spp in {:.1} s ({:.0} paths/s; optics {:.1} s)",
@@ -127,7 +132,7 @@ fn metadata(a: &Outputs, settings: &Settings, atm: &Atmosphere) -> Vec<(String, 
         ),
         Camera::LutStrip { mappings, .. } => format!("a strip of {} lut slices", mappings.len()),
     };
-    vec![
+    let mut m = vec![
         ("version".to_string(), sky::VERSION.to_string()),
         ("camera".to_string(), camera_desc),
         ("atmosphere".to_string(), atm.path.display().to_string()),
@@ -141,7 +146,12 @@ fn metadata(a: &Outputs, settings: &Settings, atm: &Atmosphere) -> Vec<(String, 
         ("band_nm".to_string(), settings.spectral.band_nm.to_string()),
         ("denoised".to_string(), a.denoise.to_string()),
         ("units".to_string(), "XYZ: CIE 1931 x 683 lm/W (Y in cd/m^2); spectral: W m^-2 sr^-1 nm^-1".to_string()),
-    ]
+    ];
+    // Only where it is not the path tracer, so that its files stay as they were.
+    if a.method != "monte-carlo" {
+        m.insert(2, ("method".to_string(), a.method.clone()));
+    }
+    m
 }
 
 /// Median, 90th percentile and maximum over the lit pixels of the relative

@@ -13,6 +13,7 @@
 //! nearer end, at most `max_tau` thick and at most `max_km` tall.
 
 use super::legendre::moments;
+use crate::atmosphere::Geometry;
 use crate::render::medium::{Medium, Phase, Spectral, GRID_STEP_KM};
 
 /// How finely the atmosphere is cut into layers.
@@ -64,6 +65,9 @@ pub struct Layers {
     pub layers: Vec<Layer>,
     pub phases: Vec<Phase>,
     pub ground_albedo: f64,
+    /// The planet's radius where the layers are spherical shells; None in a
+    /// plane-parallel atmosphere.
+    pub shell_radius_km: Option<f64>,
 }
 
 impl Layers {
@@ -94,7 +98,11 @@ impl Layers {
             let omega = if tau > 0.0 { s / tau } else { 0.0 };
             layers.push(Layer { top_km, bottom_km, tau, omega, chi, share });
         }
-        Layers { layers, phases: spectral.phase.clone(), ground_albedo: spectral.ground_albedo }
+        let shell_radius_km = match medium.geometry {
+            Geometry::Spherical => Some(medium.radius_km),
+            Geometry::PlaneParallel => None,
+        };
+        Layers { layers, phases: spectral.phase.clone(), ground_albedo: spectral.ground_albedo, shell_radius_km }
     }
 
     /// The layer's exact (untruncated) phase function at cos Θ, sr⁻¹.

@@ -76,8 +76,11 @@ pub struct Operator {
 
 /// The mode-m operator of a layer of optical depth `tau`, single-scattering
 /// albedo `omega` and (truncated) moments `chi`, lit by a beam of cosine
-/// `mu0` (F₀ = 1).
-pub fn layer(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64], mu0: f64) -> Operator {
+/// `mu0` (F₀ = 1) that loses e^{−secant t} across a vertical optical depth
+/// t of the layer: `secant` is 1/μ₀ in a plane-parallel atmosphere, and the
+/// layer's average secant along the sun's curved path in shells
+/// (pseudo-spherical, as DISORT's CHAPMN).
+pub fn layer(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64], mu0: f64, secant: f64) -> Operator {
     let n = s.n();
     let plus = lambdas(&s.mu, m, s.lmax);
     let minus: Vec<f64> = s.mu.iter().map(|u| -u).collect();
@@ -112,7 +115,7 @@ pub fn layer(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64], mu0: f64)
     for v in r.a.iter_mut().chain(t.a.iter_mut()) {
         *v *= 0.5;
     }
-    let e_mean = 0.5 * (1.0 + (-delta / mu0).exp());
+    let e_mean = 0.5 * (1.0 + (-delta * secant).exp());
     let qd: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&q_down, i) / s.mu[i]).collect();
     let qu: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&q_up, i) / s.mu[i]).collect();
     let sum = p1.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d + u).collect::<Vec<_>>());
@@ -125,7 +128,7 @@ pub fn layer(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64], mu0: f64)
     };
     let mut thickness = delta;
     for _ in 0..doublings {
-        op = double(&op, (-thickness / mu0).exp());
+        op = double(&op, (-thickness * secant).exp());
         thickness *= 2.0;
     }
     op
@@ -179,7 +182,7 @@ mod tests {
             }),
         ] {
             let mu0 = 0.5;
-            let op = layer(&s, 0, tau, 1.0, &chi, mu0);
+            let op = layer(&s, 0, tau, 1.0, &chi, mu0, 1.0 / mu0);
             for j in 0..n {
                 let out: f64 = (0..n).map(|i| s.w[i] * s.mu[i] * (op.r.at(i, j) + op.t.at(i, j))).sum();
                 let rel = (out - s.w[j] * s.mu[j]) / (s.w[j] * s.mu[j]);
@@ -198,7 +201,7 @@ mod tests {
     fn the_operators_are_reciprocal() {
         let s = Streams::new(8);
         for m in [0, 1, 5] {
-            let op = layer(&s, m, 2.5, 0.9, &hg(0.7, 15), 0.6);
+            let op = layer(&s, m, 2.5, 0.9, &hg(0.7, 15), 0.6, 1.0 / 0.6);
             for i in 0..s.n() {
                 for j in 0..s.n() {
                     for mat in [&op.r, &op.t] {

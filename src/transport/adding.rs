@@ -1,0 +1,366 @@
+//! The diffuse radiance at the ground of a layered atmosphere, by discrete
+//! ordinates in Fourier modes of azimuth, layer operators (`operator`) and
+//! the adding method, with the single scattering exact. Plane-parallel
+//! layers exactly; spherical shells pseudo-spherically (`Paths`: the
+//! sun's beam and the views run straight through the shells).
+//!
+//! 1. Delta-M (Wiscombe 1977): with N streams a hemisphere, each layer's
+//!    phase function keeps the moments below 2N, its forward peak
+//!    f = χ_2N moves into the direct beam: χ′_l = (χ_l − f) / (1 − f),
+//!    τ′ = (1 − ω f) τ, ω′ = ω (1 − f) / (1 − ω f).
+//! 2. Per mode m, the layers' operators are added (Stamnes 1982's adding
+//!    with internal fields, in the notation of `operator`): from the top
+//!    down, the reflection R*_k of everything above interface k seen from
+//!    below and the radiance D̂_k it sends down; from the ground up, the
+//!    reflection R_g,k of everything below seen from above (the Lambertian
+//!    ground reflects in mode 0 only: I⁻ = (A/π)(μ₀ F₀ e^{−τ′*/μ₀} + 2π Σ w μ I⁺))
+//!    and the radiance Û_k it sends up. At each interface
+//!    D_k = (I − R*_k R_g,k)⁻¹ (D̂_k + R*_k Û_k), U_k = R_g,k D_k + Û_k.
+//! 3. The source of the light scattered twice or more, at a view cosine
+//!    μ_v, is J^m(τ) = (ω′/2) Σ_j w_j [p′^m(μ_v, μ_j) D_j + p′^m(μ_v, −μ_j) U_j]
+//!    at each layer's top and base (the direct beam left out); taken linear
+//!    in τ′ across the layer, its integral to the ground,
+//!    ∫ J e^{−(τ′* − τ′)/μ_v} dτ′/μ_v, is exact (Stamnes et al. 1988 do the
+//!    same at user angles with their analytic layer solution).
+//! 4. The single scattering, ω p(Θ) F₀ ∫ e^{−τ/μ₀} e^{−(τ* − τ)/μ_v} dτ/μ_v,
+//!    in each homogeneous layer in closed form with the exact phase
+//!    function and the unscaled optical depths (the "exact single
+//!    scattering" of Nakajima and Tanaka 1988, which is what makes
+//!    delta-M accurate outside the forward peak).
+//!
+//! Modes are summed until two in a row add less than 1e-6 of the mode-0
+//! radiance at every view.
+
+use super::layers::Layers;
+use super::legendre::normalised_associated;
+use super::linalg::Mat;
+use super::operator::{lambdas, layer, Operator, Streams};
+use std::f64::consts::PI;
+
+/// A view from the ground: the cosine of its zenith angle (> 0, looking up)
+/// and its azimuth from the sun's, radians.
+#[derive(Debug, Clone, Copy)]
+pub struct View {
+    pub mu: f64,
+    pub azimuth_from_sun_rad: f64,
+}
+
+/// Diffuse radiance at the ground per unit solar irradiance normal to the
+/// beam (sr⁻¹), for a sun of zenith cosine `mu0`, at each view; `streams`
+/// a hemisphere. The single scattering is the layers' closed form, which
+/// holds in a plane-parallel atmosphere (`render` uses the path tracer's
+/// quadrature instead, in any geometry).
+pub fn ground_radiance(layers: &Layers, streams: usize, mu0: f64, views: &[View]) -> Vec<f64> {
+    let diffuse = Diffuse::solve(layers, streams, mu0, views.iter().map(|v| v.mu).collect());
+    views
+        .iter()
+        .enumerate()
+        .map(|(k, v)| single_scattering(layers, mu0, v) + diffuse.at_node(k, v.azimuth_from_sun_rad))
+        .collect()
+}
+
+/// The light scattered two or more times that reaches the ground, per unit
+/// solar irradiance normal to the beam: its Fourier modes in azimuth at a
+/// set of view cosines (`nodes`), and the irradiance on the ground.
+#[derive(Debug, Clone)]
+pub struct Diffuse {
+    /// The view cosines the modes are evaluated at (> 0: looking up).
+    pub nodes: Vec<f64>,
+    /// `modes[m][k]`: the mode-m radiance at node k, sr⁻¹; the radiance is
+    /// Σ_m modes[m][k] cos(m φ) for φ the azimuth from the sun.
+    pub modes: Vec<Vec<f64>>,
+    /// The irradiance on a horizontal ground, direct (delta-M scaled, so
+    /// that the forward peak's light counts once) and diffuse.
+    pub ground_irradiance: f64,
+}
+
+impl Diffuse {
+    /// Solves mode after mode until two in a row add less than 1e-6 of the
+    /// mode-0 radiance at every node. A sun below the horizon lights
+    /// nothing in a plane-parallel atmosphere.
+    pub fn solve(layers: &Layers, streams: usize, mu0: f64, nodes: Vec<f64>) -> Diffuse {
+        if mu0 <= 0.0 {
+            return Diffuse { modes: vec![vec![0.0; nodes.len()]], nodes, ground_irradiance: 0.0 };
+        }
+        let s = Streams::new(streams);
+        let scaled = delta_m(layers, 2 * streams);
+        let paths = Paths::new(layers, &scaled, mu0, &nodes);
+        let mut modes: Vec<Vec<f64>> = Vec::new();
+        let mut ground_irradiance = 0.0;
+        let mut quiet = 0;
+        for m in 0..2 * streams {
+            let (mode, diffuse_flux) = multiple_scattering_mode(&s, &scaled, layers.ground_albedo, mu0, m, &paths);
+            if m == 0 {
+                ground_irradiance = mu0 * paths.beam[scaled.len()] + diffuse_flux;
+            }
+            let largest = mode
+                .iter()
+                .zip(modes.first().unwrap_or(&mode).iter())
+                .map(|(x, z)| x.abs() / z.abs().max(1e-300))
+                .fold(0.0, f64::max);
+            modes.push(mode);
+            quiet = if m > 0 && largest < 1e-6 { quiet + 1 } else { 0 };
+            if quiet == 2 {
+                break;
+            }
+        }
+        Diffuse { nodes, modes, ground_irradiance }
+    }
+
+    /// The radiance at node `k` and azimuth `phi` from the sun.
+    pub fn at_node(&self, k: usize, phi: f64) -> f64 {
+        self.modes.iter().enumerate().map(|(m, mode)| mode[k] * (m as f64 * phi).cos()).sum()
+    }
+}
+
+/// A layer after delta-M scaling.
+#[derive(Debug, Clone)]
+struct Scaled {
+    tau: f64,
+    omega: f64,
+    chi: Vec<f64>,
+}
+
+fn delta_m(layers: &Layers, moments: usize) -> Vec<Scaled> {
+    layers
+        .layers
+        .iter()
+        .map(|l| {
+            let f = l.chi.get(moments).copied().unwrap_or(0.0).max(0.0);
+            let chi = (0..moments).map(|k| (l.chi[k] - f) / (1.0 - f)).collect();
+            let tau = (1.0 - l.omega * f) * l.tau;
+            let omega = if tau > 0.0 { l.omega * (1.0 - f) / (1.0 - l.omega * f) } else { 0.0 };
+            Scaled { tau, omega, chi }
+        })
+        .collect()
+}
+
+/// The straight paths the solution needs through its layers (delta-M
+/// scaled optical depths): the sun's, from each interface up, and each
+/// view's, from the ground up. In a plane-parallel atmosphere a path across
+/// a layer is its thickness over the cosine; in spherical shells (the
+/// pseudo-spherical approximation: the diffuse light of each altitude is
+/// that of a plane-parallel column, but the sun's beam reaching it and the
+/// views leaving the ground run straight through curved shells) it is the
+/// chord between the shells, and a view's cosine grows with altitude.
+struct Paths {
+    /// The direct beam's transmittance to each interface, top down.
+    beam: Vec<f64>,
+    /// Each layer's average secant along the sun's path (DISORT's CHAPMN):
+    /// the slant optical depth across it per unit of its vertical depth.
+    secant: Vec<f64>,
+    /// Per view: its cosine at each interface, and its optical path across
+    /// each layer.
+    views: Vec<(Vec<f64>, Vec<f64>)>,
+}
+
+impl Paths {
+    fn new(layers: &Layers, scaled: &[Scaled], mu0: f64, view_mu: &[f64]) -> Paths {
+        let nl = scaled.len();
+        let radius = layers.shell_radius_km;
+        let z: Vec<f64> = std::iter::once(layers.layers.first().map_or(0.0, |l| l.top_km))
+            .chain(layers.layers.iter().map(|l| l.bottom_km))
+            .collect();
+        // Scaled extinction of each (homogeneous) layer, km⁻¹.
+        let sigma: Vec<f64> = scaled.iter().enumerate().map(|(k, l)| l.tau / (z[k] - z[k + 1])).collect();
+        let slant: Vec<f64> =
+            (0..=nl).map(|i| (0..i).map(|j| sigma[j] * chord_km(radius, z[i], mu0, z[j + 1], z[j])).sum()).collect();
+        let secant = (0..nl)
+            .map(|k| match radius {
+                Some(_) if scaled[k].tau > 0.0 => ((slant[k + 1] - slant[k]) / scaled[k].tau).max(1e-6),
+                _ => 1.0 / mu0,
+            })
+            .collect();
+        let views = view_mu
+            .iter()
+            .map(|&u| {
+                let cosines = z.iter().map(|&zi| cosine_at(radius, u, zi)).collect();
+                let optical = (0..nl).map(|k| sigma[k] * chord_km(radius, 0.0, u, z[k + 1], z[k])).collect();
+                (cosines, optical)
+            })
+            .collect();
+        Paths { beam: slant.iter().map(|t| (-t).exp()).collect(), secant, views }
+    }
+}
+
+/// The direct beam's transmittance from the top of the atmosphere to the
+/// ground (unscaled optical depths, along the sun's straight path through
+/// the shells where the layers are spherical).
+pub fn sun_transmittance(layers: &Layers, mu0: f64) -> f64 {
+    if mu0 <= 0.0 {
+        return 0.0;
+    }
+    let slant: f64 = layers
+        .layers
+        .iter()
+        .map(|l| l.tau / (l.top_km - l.bottom_km) * chord_km(layers.shell_radius_km, 0.0, mu0, l.bottom_km, l.top_km))
+        .sum();
+    (-slant).exp()
+}
+
+/// The length (km) between altitudes `z_lo` < `z_hi` of a straight ray
+/// that leaves altitude `z0` ≤ `z_lo` upward at zenith cosine `u` > 0: the
+/// thickness over `u` in a plane-parallel atmosphere; in shells about a
+/// centre `radius` below the ground, the difference of √((R + z)² − b²)
+/// between the ends, with b = (R + z0) √(1 − u²) the ray's impact
+/// parameter.
+fn chord_km(radius: Option<f64>, z0: f64, u: f64, z_lo: f64, z_hi: f64) -> f64 {
+    match radius {
+        None => (z_hi - z_lo) / u,
+        Some(r) => {
+            let b2 = (r + z0) * (r + z0) * (1.0 - u * u);
+            let along = |z: f64| ((r + z) * (r + z) - b2).max(0.0).sqrt();
+            along(z_hi) - along(z_lo)
+        }
+    }
+}
+
+/// The zenith cosine at altitude `z` of a ray that leaves the ground at
+/// zenith cosine `u` > 0 (the same everywhere in a plane-parallel
+/// atmosphere; in shells its sine falls as R / (R + z)).
+fn cosine_at(radius: Option<f64>, u: f64, z: f64) -> f64 {
+    match radius {
+        None => u,
+        Some(r) => {
+            let sine = r / (r + z) * (1.0 - u * u).max(0.0).sqrt();
+            (1.0 - sine * sine).max(0.0).sqrt()
+        }
+    }
+}
+
+/// The mode-m radiance of the light scattered two or more times at each
+/// view, and (mode 0) the diffuse irradiance on the ground.
+fn multiple_scattering_mode(
+    s: &Streams,
+    layers: &[Scaled],
+    albedo: f64,
+    mu0: f64,
+    m: usize,
+    paths: &Paths,
+) -> (Vec<f64>, f64) {
+    let n = s.n();
+    let nl = layers.len();
+    let ops: Vec<Operator> =
+        layers.iter().zip(&paths.secant).map(|(l, &sec)| layer(s, m, l.tau, l.omega, &l.chi, mu0, sec)).collect();
+    let beam = &paths.beam;
+    // From the ground up.
+    let mut rg = vec![Mat::zeros(n); nl + 1];
+    let mut ug = vec![vec![0.0; n]; nl + 1];
+    if m == 0 && albedo > 0.0 {
+        for i in 0..n {
+            for j in 0..n {
+                rg[nl].set(i, j, 2.0 * albedo * s.w[j] * s.mu[j]);
+            }
+            ug[nl][i] = albedo * mu0 * beam[nl] / PI;
+        }
+    }
+    for k in (0..nl).rev() {
+        let op = &ops[k];
+        let g = rg[k + 1].mul(&op.r).one_minus().lu().expect("the medium below reflects less than all");
+        // Light entering layer k+1's top from below... (layer k spans interfaces k and k+1).
+        let below = rg[k + 1].mul_vec(&op.s_down);
+        let src: Vec<f64> = below.iter().zip(&ug[k + 1]).map(|(a, b)| beam[k] * a + b).collect();
+        let up_into = g.solve_vec(&src);
+        let t_up = op.t.mul_vec(&up_into);
+        ug[k] = t_up.iter().zip(&op.s_up).map(|(a, b)| a + beam[k] * b).collect();
+        rg[k] = op.r.add_scaled(&op.t.mul(&g.solve(&rg[k + 1].mul(&op.t))), 1.0);
+    }
+    // From the top down, and the fields at each interface.
+    let mut rs = Mat::zeros(n);
+    let mut ds = vec![0.0; n];
+    let mut down = vec![vec![0.0; n]; nl + 1];
+    let mut up = vec![vec![0.0; n]; nl + 1];
+    for k in 0..=nl {
+        if k > 0 {
+            let op = &ops[k - 1];
+            let g = rs.mul(&op.r).one_minus().lu().expect("the medium above reflects less than all");
+            let rsu = rs.mul_vec(&op.s_up);
+            let into = g.solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + beam[k - 1] * r).collect::<Vec<_>>());
+            let t_into = op.t.mul_vec(&into);
+            ds = t_into.iter().zip(&op.s_down).map(|(a, b)| a + beam[k - 1] * b).collect();
+            rs = op.r.add_scaled(&op.t.mul(&g.solve(&rs.mul(&op.t))), 1.0);
+        }
+        let g = rs.mul(&rg[k]).one_minus().lu().expect("the two sides reflect less than all");
+        let rsu = rs.mul_vec(&ug[k]);
+        down[k] = g.solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + r).collect::<Vec<_>>());
+        let rgd = rg[k].mul_vec(&down[k]);
+        up[k] = rgd.iter().zip(&ug[k]).map(|(a, b)| a + b).collect();
+    }
+    let diffuse_flux = 2.0 * PI * (0..n).map(|j| s.w[j] * s.mu[j] * down[nl][j]).sum::<f64>();
+    // The source at a view cosine u and interface i is
+    // J = (ω/2) Σ_l (2l + 1) χ_l Λ_l^m(u) a_l(i), with
+    // a_l(i) = Σ_j w_j [Λ_l^m(μ_j) D_ij + Λ_l^m(−μ_j) U_ij] the same for every
+    // layer: the phase function's sum is done once per interface, not per view.
+    let plus = lambdas(&s.mu, m, s.lmax);
+    let minus = lambdas(&s.mu.iter().map(|u| -u).collect::<Vec<_>>(), m, s.lmax);
+    let a: Vec<Vec<f64>> = (0..=nl)
+        .map(|i| {
+            (0..=s.lmax)
+                .map(|l| (0..n).map(|j| s.w[j] * (plus[j][l] * down[i][j] + minus[j][l] * up[i][j])).sum())
+                .collect()
+        })
+        .collect();
+    let radiance = paths
+        .views
+        .iter()
+        .map(|(cosines, optical)| {
+            // Λ^m at the view's cosine at each interface (one cosine for
+            // all of them in a plane-parallel atmosphere).
+            let mut lam: Vec<Vec<f64>> = Vec::with_capacity(nl + 1);
+            for (i, &u) in cosines.iter().enumerate() {
+                let same = i > 0 && cosines[i - 1] == u;
+                lam.push(if same { lam[i - 1].clone() } else { normalised_associated(s.lmax, m, u) });
+            }
+            let j_at = |l: &Scaled, i: usize| -> f64 {
+                let lv = &lam[i];
+                0.5 * l.omega * (m..=s.lmax).map(|k| (2 * k + 1) as f64 * l.chi[k] * lv[k] * a[i][k]).sum::<f64>()
+            };
+            // From the ground up: each layer's source, linear in optical
+            // path across it, attenuated by the layers below.
+            let (mut radiance, mut below) = (0.0f64, 0.0f64);
+            for k in (0..nl).rev() {
+                let l = &layers[k];
+                let (j_top, j_base) = (j_at(l, k), j_at(l, k + 1));
+                let x = optical[k];
+                let e = (-x).exp();
+                // (1 − e^{−x}) / x, by its series for thin layers.
+                let q = if x < 1e-5 { 1.0 - 0.5 * x + x * x / 6.0 } else { -(-x).exp_m1() / x };
+                let through = j_base * (1.0 - q) + j_top * (q - e);
+                radiance += through * (-below).exp();
+                below += x;
+            }
+            radiance
+        })
+        .collect();
+    (radiance, diffuse_flux)
+}
+
+/// Sunlight scattered once on its way to a view from the ground (module
+/// documentation, step 4).
+fn single_scattering(layers: &Layers, mu0: f64, v: &View) -> f64 {
+    let cos_theta = (v.mu * mu0
+        + (1.0 - v.mu * v.mu).max(0.0).sqrt() * (1.0 - mu0 * mu0).max(0.0).sqrt() * v.azimuth_from_sun_rad.cos())
+    .clamp(-1.0, 1.0);
+    let total = layers.total_tau();
+    let c = 1.0 / mu0 - 1.0 / v.mu;
+    let mut top = 0.0;
+    let mut sum = 0.0;
+    for l in &layers.layers {
+        if l.tau > 0.0 && l.omega > 0.0 {
+            // ∫ e^{−τ/μ₀ − (τ* − τ)/μ_v} dτ over the layer: e(top) ∫₀^Δ e^{−c s} ds,
+            // or the difference of its ends where cΔ is large (neither overflows).
+            let at = |t: f64| (-t / mu0 - (total - t) / v.mu).exp();
+            let cd = c * l.tau;
+            let integral = if cd.abs() < 1e-12 {
+                at(top) * l.tau
+            } else if cd.abs() < 1.0 {
+                at(top) * -(-cd).exp_m1() / c
+            } else {
+                (at(top) - at(top + l.tau)) / c
+            };
+            sum += l.omega * layers.phase(l, cos_theta) * integral / v.mu;
+        }
+        top += l.tau;
+    }
+    sum
+}
