@@ -194,9 +194,10 @@ final-cost: build
 	  --slice $(subst $(space),$(comma),$(foreach s,clear hazed cloudy0 cloudy1 cloudy2 cloudy3 cloudy4 cloudy5,$(foreach i,$(PROBE_SLICES),$(s):$(i)))) > $(OUT)/cost-probe.json
 	python3 scripts/final_cost.py $(OUT)/cost-probe.json 16 64
 
-# The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples.
+# The whole DISORT grid (210 directions x 3 wavelengths x 2 slabs) at more samples, and the
+# deterministic solver against the path tracer converged on a few dozen directions (issue 37).
 validate: build
-	$(CARGO) test --release --locked --test suite -- disort:: --ignored --nocapture
+	$(CARGO) test --release --locked --test suite -- disort:: transport:: --ignored --nocapture
 
 # Long fuzzing of the atmosphere loader and of a worker's farm-message
 # checks (tests/fuzz.rs; `make test` runs a short version of each).

@@ -244,3 +244,63 @@ fn the_method_flag_renders_or_says_why_not() {
         assert!(err.contains(says), "{args:?}: {err}");
     }
 }
+
+/// Issue 37's judge of the spherical skies by day, for `make validate`: the
+/// deterministic render (32 streams a hemisphere) against the path tracer
+/// converged to about 0.2 % on 12 directions, `clear.toml` with the sun at
+/// 20°, 60° and 85° from the zenith; every direction within 1 % and within
+/// the Šidák threshold of the family at 1 %. The pseudo-spherical solution
+/// is expected to miss near the horizon under a low sun (TRANSPORT.md):
+/// this test measures by how much.
+#[test]
+#[ignore = "the path tracer at 65 536 samples on 36 directions: minutes (make validate)"]
+fn deterministic_daylight_against_a_converged_path_tracer() {
+    let atm = Atmosphere::load(&root().join("atmospheres/clear.toml")).unwrap();
+    let dirs: Vec<(f64, f64)> = [
+        (0.0, 0.0),
+        (30.0, 0.0),
+        (30.0, 90.0),
+        (30.0, 180.0),
+        (60.0, 30.0),
+        (60.0, 90.0),
+        (60.0, 180.0),
+        (80.0, 10.0),
+        (80.0, 90.0),
+        (80.0, 180.0),
+        (88.0, 45.0),
+        (88.0, 180.0),
+    ]
+    .to_vec();
+    let spectral = SpectralSettings {
+        band_nm: 10.0,
+        wavelength_sampling: WavelengthSampling::Hero,
+        spectral_nm: vec![],
+        xyz: true,
+    };
+    let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
+    let resolution = Resolution { streams: 32, ..Default::default() };
+    let (mut family, mut beyond) = (Family::default(), Vec::new());
+    for (k, sun) in [20.0, 60.0, 85.0].into_iter().enumerate() {
+        let mut settings = Settings::directions(dirs.clone(), sun, vec![], 65_536, 100 + k as u64, false);
+        settings.spectral = spectral.clone();
+        let mc = sky::render::render(&scene, &settings.view, &AtomicBool::new(false), &|| {}).unwrap();
+        let det = render(&scene, &settings.view, &resolution, &|| {}).unwrap();
+        for ((m, d), dir) in mc.pixels.iter().zip(&det.pixels).zip(&dirs) {
+            let (rel, z) = (d.xyz[1] / m.xyz[1] - 1.0, (d.xyz[1] - m.xyz[1]) / m.xyz_stderr[1]);
+            let label = format!(
+                "sun {sun}, view {dir:?}: Y {:.5e} against {:.5e} ± {:.2} % ({:+.2} %)",
+                d.xyz[1],
+                m.xyz[1],
+                100.0 * m.xyz_stderr[1] / m.xyz[1],
+                100.0 * rel
+            );
+            eprintln!("{label}: z {z:+.1}");
+            if rel.abs() > 0.01 {
+                beyond.push(label.clone());
+            }
+            family.push(label, z);
+        }
+    }
+    let failures = family.failures(0.01);
+    assert!(failures.is_empty() && beyond.is_empty(), "beyond 1 %: {beyond:#?}\nbeyond the threshold: {failures:#?}");
+}
