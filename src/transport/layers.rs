@@ -26,8 +26,14 @@ pub struct Grading {
 }
 
 impl Default for Grading {
+    /// The source along a view is taken linear in optical depth across a
+    /// layer, an error that falls as the square of the layers' thickness and
+    /// shows most on long, nearly horizontal paths: with layers twice as
+    /// thick as these (first 0.02, growth 0.3, at most 1 and 2 km) the
+    /// Rayleigh + HG slab was 0.51 % off DISORT at 89° from the zenith; with
+    /// these, 0.11 % (tests/transport.rs, `disort_horizon.json`).
     fn default() -> Grading {
-        Grading { first_tau: 0.02, growth: 0.3, max_tau: 1.0, max_km: 2.0 }
+        Grading { first_tau: 0.01, growth: 0.15, max_tau: 0.5, max_km: 1.0 }
     }
 }
 
