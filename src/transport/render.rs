@@ -51,7 +51,7 @@ pub struct Resolution {
 }
 
 impl Default for Resolution {
-    /// 16 streams a hemisphere: within 0.25 % of DISORT on the clear and
+    /// 16 streams a hemisphere: within 0.05 % of DISORT on the clear and
     /// hazed slabs (tests/transport.rs); the cloud slabs need 32.
     fn default() -> Resolution {
         Resolution { streams: 16, grading: Grading::default() }
