@@ -24,6 +24,24 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// A reference case's views more than 5° from the sun, as (zenith,
+/// azimuth from the sun) in degrees, each with DISORT's radiance.
+fn views_beyond_5_degrees(case: &Value) -> Vec<((f64, f64), f64)> {
+    let numbers =
+        |key: &str| -> Vec<f64> { case[key].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect() };
+    let sun = sky::directions::camera::direction_deg(case["sun_zenith_deg"].as_f64().unwrap(), 0.0);
+    let mut out = Vec::new();
+    for (i, z) in numbers("view_zenith_deg").iter().enumerate() {
+        for (j, a) in numbers("relative_azimuth_deg").iter().enumerate() {
+            let d = sky::directions::camera::direction_deg(*z, *a);
+            if d.dot(sun).clamp(-1.0, 1.0).acos().to_degrees() > 5.0 {
+                out.push(((*z, *a), case["radiance_sr_inv"][i][j].as_f64().unwrap()));
+            }
+        }
+    }
+    out
+}
+
 /// The largest relative error over every case and view beyond 5° of the
 /// sun, printing each case's worst, at `streams` a hemisphere.
 fn worst_against(reference: &str, streams: usize, grading: &Grading) -> f64 {
@@ -37,21 +55,10 @@ fn worst_against(reference: &str, streams: usize, grading: &Grading) -> f64 {
         let spectral = medium.spectral(&atm, nm, 1.0, case["ground_albedo"].as_f64().unwrap(), &cache);
         let layers = Layers::new(&medium, &spectral, 2 * streams, grading);
         let sun_zenith_deg = case["sun_zenith_deg"].as_f64().unwrap();
-        let zen: Vec<f64> = case["view_zenith_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let az: Vec<f64> =
-            case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let (mut views, mut want) = (Vec::new(), Vec::new());
-        for (i, z) in zen.iter().enumerate() {
-            for (j, a) in az.iter().enumerate() {
-                let (zr, ar, sr) = (z.to_radians(), a.to_radians(), sun_zenith_deg.to_radians());
-                let cos_from_sun = zr.cos() * sr.cos() + zr.sin() * sr.sin() * ar.cos();
-                if cos_from_sun.clamp(-1.0, 1.0).acos().to_degrees() <= 5.0 {
-                    continue;
-                }
-                views.push(View { mu: zr.cos(), azimuth_from_sun_rad: ar });
-                want.push(case["radiance_sr_inv"][i][j].as_f64().unwrap());
-            }
-        }
+        let (views, want): (Vec<View>, Vec<f64>) = views_beyond_5_degrees(case)
+            .into_iter()
+            .map(|((z, a), w)| (View { mu: z.to_radians().cos(), azimuth_from_sun_rad: a.to_radians() }, w))
+            .unzip();
         let got = ground_radiance(&layers, streams, sun_zenith_deg.to_radians().cos(), &views);
         let mut case_worst = (0.0f64, 0usize);
         for (k, (g, w)) in got.iter().zip(&want).enumerate() {
@@ -103,20 +110,7 @@ fn deterministic_renders_match_disort_beyond_5_degrees_of_the_sun() {
         let atm = Atmosphere::load(&root().join(case["atmosphere"].as_str().unwrap())).unwrap();
         let nm = case["wavelength_nm"].as_f64().unwrap();
         let sun_zenith_deg = case["sun_zenith_deg"].as_f64().unwrap();
-        let zen: Vec<f64> = case["view_zenith_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let az: Vec<f64> =
-            case["relative_azimuth_deg"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-        let (mut dirs, mut want) = (Vec::new(), Vec::new());
-        for (i, z) in zen.iter().enumerate() {
-            for (j, a) in az.iter().enumerate() {
-                let d = sky::directions::camera::direction_deg(*z, *a);
-                let sun = sky::directions::camera::direction_deg(sun_zenith_deg, 0.0);
-                if d.dot(sun).clamp(-1.0, 1.0).acos().to_degrees() > 5.0 {
-                    dirs.push((*z, *a));
-                    want.push(case["radiance_sr_inv"][i][j].as_f64().unwrap());
-                }
-            }
-        }
+        let (dirs, want): (Vec<(f64, f64)>, Vec<f64>) = views_beyond_5_degrees(case).into_iter().unzip();
         let settings = Settings::directions(dirs.clone(), sun_zenith_deg, vec![nm], 1, 1, false);
         let scene = Scene::new(&atm, &settings.spectral, &cache, &|| {});
         let image = render(&scene, &settings.view, &Resolution::default(), &|| {}).unwrap();

@@ -254,7 +254,7 @@ impl<'a> SingleScattering<'a> {
 }
 
 /// XYZ of per-band radiances with the bands' weights.
-fn xyz_of(weight: &[[f64; 3]], l: &[f64]) -> [f64; 3] {
+pub fn xyz_of(weight: &[[f64; 3]], l: &[f64]) -> [f64; 3] {
     let mut xyz = [0.0; 3];
     for (lb, w) in l.iter().zip(weight) {
         for c in 0..3 {

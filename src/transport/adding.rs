@@ -304,15 +304,18 @@ fn multiple_scattering_mode(
         .views
         .iter()
         .map(|(cosines, optical)| {
-            // Λ^m at the view's cosine at each interface (one cosine for
-            // all of them in a plane-parallel atmosphere).
-            let mut lam: Vec<Vec<f64>> = Vec::with_capacity(nl + 1);
+            // Λ^m at the view's cosine at each interface, computed once per
+            // distinct cosine (one for all of them in a plane-parallel
+            // atmosphere): `which[i]` indexes `lam`.
+            let (mut lam, mut which): (Vec<Vec<f64>>, Vec<usize>) = (Vec::new(), Vec::with_capacity(nl + 1));
             for (i, &u) in cosines.iter().enumerate() {
-                let same = i > 0 && cosines[i - 1] == u;
-                lam.push(if same { lam[i - 1].clone() } else { normalised_associated(s.lmax, m, u) });
+                if i == 0 || cosines[i - 1] != u {
+                    lam.push(normalised_associated(s.lmax, m, u));
+                }
+                which.push(lam.len() - 1);
             }
             let j_at = |l: &Scaled, i: usize| -> f64 {
-                let lv = &lam[i];
+                let lv = &lam[which[i]];
                 0.5 * l.omega * (m..=s.lmax).map(|k| (2 * k + 1) as f64 * l.chi[k] * lv[k] * a[i][k]).sum::<f64>()
             };
             // From the ground up: each layer's source, linear in optical

@@ -25,7 +25,7 @@ use super::adding::Diffuse;
 use super::layers::{Grading, Layers};
 use crate::atmosphere::Geometry;
 use crate::render::medium::Spectral;
-use crate::render::single::SingleScattering;
+use crate::render::single::{xyz_of, SingleScattering};
 use crate::render::{Image, PixelResult, Scene, View};
 use glam::DVec3;
 use rayon::prelude::*;
@@ -214,18 +214,9 @@ fn render_part(
             let weight = &scene.bands.weight;
             let (band_l, band_direct) = radiance(&bands, &single_bands, &|_| 1.0);
             let (line_l, _) = radiance(&lines, &single_lines, &|k| scene.line_optics[k].sun_irradiance);
-            let xyz_of = |l: &[f64]| {
-                let mut xyz = [0.0; 3];
-                for (lb, wb) in l.iter().zip(weight) {
-                    for c in 0..3 {
-                        xyz[c] += wb[c] * lb;
-                    }
-                }
-                xyz
-            };
             PixelResult {
-                xyz: xyz_of(&band_l),
-                xyz_direct: xyz_of(&band_direct),
+                xyz: xyz_of(weight, &band_l),
+                xyz_direct: xyz_of(weight, &band_direct),
                 xyz_stderr: [0.0; 3],
                 spectral_stderr: vec![0.0; line_l.len()],
                 spectral: line_l,
