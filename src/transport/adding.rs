@@ -33,8 +33,8 @@
 
 use super::layers::Layers;
 use super::legendre::normalised_associated;
-use super::linalg::Mat;
-use super::operator::{lambdas, layer, Operator, Streams};
+use super::linalg::{Lu, Mat};
+use super::operator::{lambdas, LayerMatrices, Streams};
 use std::f64::consts::PI;
 
 /// A view from the ground: the cosine of its zenith angle (> 0, looking up)
@@ -115,13 +115,13 @@ impl Diffuse {
 
 /// A layer after delta-M scaling.
 #[derive(Debug, Clone)]
-struct Scaled {
-    tau: f64,
-    omega: f64,
-    chi: Vec<f64>,
+pub(super) struct Scaled {
+    pub tau: f64,
+    pub omega: f64,
+    pub chi: Vec<f64>,
 }
 
-fn delta_m(layers: &Layers, moments: usize) -> Vec<Scaled> {
+pub(super) fn delta_m(layers: &Layers, moments: usize) -> Vec<Scaled> {
     layers
         .layers
         .iter()
@@ -143,7 +143,7 @@ fn delta_m(layers: &Layers, moments: usize) -> Vec<Scaled> {
 /// that of a plane-parallel column, but the sun's beam reaching it and the
 /// views leaving the ground run straight through curved shells) it is the
 /// chord between the shells, and a view's cosine grows with altitude.
-struct Paths {
+pub(super) struct Paths {
     /// The direct beam's transmittance to each interface, top down.
     beam: Vec<f64>,
     /// Each layer's average secant along the sun's path (DISORT's CHAPMN):
@@ -228,6 +228,134 @@ fn cosine_at(radius: Option<f64>, u: f64, z: f64) -> f64 {
     }
 }
 
+/// The sun-independent part of one mode's adding: the layers' matrices,
+/// the reflections of everything below (`rg`) and above (`rs`) each
+/// interface, and the factorised systems the adding solves (module
+/// documentation, step 2).
+pub(super) struct ModeMatrices {
+    ops: Vec<LayerMatrices>,
+    rg: Vec<Mat>,
+    /// (I − R_g,k+1 R_k), factorised, for layer k.
+    below: Vec<Lu>,
+    rs: Vec<Mat>,
+    /// (I − R*_k R_k), factorised, for layer k (the medium above it).
+    above: Vec<Lu>,
+    /// (I − R*_k R_g,k), factorised, at interface k.
+    between: Vec<Lu>,
+    /// Whether the ground reflects this mode (mode 0 over a bright ground).
+    lambertian: bool,
+}
+
+impl ModeMatrices {
+    pub(super) fn new(s: &Streams, layers: &[Scaled], albedo: f64, m: usize) -> ModeMatrices {
+        let (n, nl) = (s.n(), layers.len());
+        let ops: Vec<LayerMatrices> = layers.iter().map(|l| LayerMatrices::new(s, m, l.tau, l.omega, &l.chi)).collect();
+        let mut rg = vec![Mat::zeros(n); nl + 1];
+        if m == 0 && albedo > 0.0 {
+            for i in 0..n {
+                for j in 0..n {
+                    rg[nl].set(i, j, 2.0 * albedo * s.w[j] * s.mu[j]);
+                }
+            }
+        }
+        let mut below = Vec::with_capacity(nl);
+        for k in (0..nl).rev() {
+            let op = &ops[k];
+            let g = rg[k + 1].mul(&op.r).one_minus().lu().expect("the medium below reflects less than all");
+            rg[k] = op.r.add_scaled(&op.t.mul(&g.solve(&rg[k + 1].mul(&op.t))), 1.0);
+            below.push(g);
+        }
+        below.reverse();
+        let mut rs = vec![Mat::zeros(n)];
+        let mut above = Vec::with_capacity(nl);
+        for op in &ops {
+            let last = rs.last().expect("starts with the top");
+            let g = last.mul(&op.r).one_minus().lu().expect("the medium above reflects less than all");
+            let next = op.r.add_scaled(&op.t.mul(&g.solve(&last.mul(&op.t))), 1.0);
+            above.push(g);
+            rs.push(next);
+        }
+        let between = (0..=nl)
+            .map(|k| rs[k].mul(&rg[k]).one_minus().lu().expect("the two sides reflect less than all"))
+            .collect();
+        ModeMatrices { ops, rg, below, rs, above, between, lambertian: m == 0 && albedo > 0.0 }
+    }
+
+    /// The diffuse radiance down (`.0`) and up (`.1`) the streams at each
+    /// interface, top down, for a sun of cosine `mu0` (negative: below the
+    /// local horizon) whose beam reaches the interfaces as `paths` says.
+    pub(super) fn fields(&self, s: &Streams, albedo: f64, mu0: f64, paths: &Paths) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let (n, nl) = (s.n(), self.ops.len());
+        let beam = &paths.beam;
+        let src: Vec<(Vec<f64>, Vec<f64>)> =
+            self.ops.iter().zip(&paths.secant).map(|(op, &sec)| op.sources(s, mu0, sec)).collect();
+        // From the ground up: the radiance Û_k everything below sends up.
+        let mut ug = vec![vec![0.0; n]; nl + 1];
+        if self.lambertian {
+            ug[nl] = vec![albedo * mu0.max(0.0) * beam[nl] / PI; n];
+        }
+        for k in (0..nl).rev() {
+            let op = &self.ops[k];
+            let below = self.rg[k + 1].mul_vec(&src[k].0);
+            let into: Vec<f64> = below.iter().zip(&ug[k + 1]).map(|(a, b)| beam[k] * a + b).collect();
+            let up_into = self.below[k].solve_vec(&into);
+            let t_up = op.t.mul_vec(&up_into);
+            ug[k] = t_up.iter().zip(&src[k].1).map(|(a, b)| a + beam[k] * b).collect();
+        }
+        // From the top down, and the fields at each interface.
+        let mut ds = vec![0.0; n];
+        let mut down = vec![vec![0.0; n]; nl + 1];
+        let mut up = vec![vec![0.0; n]; nl + 1];
+        for k in 0..=nl {
+            if k > 0 {
+                let (op, (s_down, s_up)) = (&self.ops[k - 1], &src[k - 1]);
+                let rsu = self.rs[k - 1].mul_vec(s_up);
+                let into = self.above[k - 1]
+                    .solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + beam[k - 1] * r).collect::<Vec<_>>());
+                let t_into = op.t.mul_vec(&into);
+                ds = t_into.iter().zip(s_down).map(|(a, b)| a + beam[k - 1] * b).collect();
+            }
+            let rsu = self.rs[k].mul_vec(&ug[k]);
+            down[k] = self.between[k].solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + r).collect::<Vec<_>>());
+            let rgd = self.rg[k].mul_vec(&down[k]);
+            up[k] = rgd.iter().zip(&ug[k]).map(|(a, b)| a + b).collect();
+        }
+        (down, up)
+    }
+}
+
+/// The source's coefficients at each interface (module documentation,
+/// step 3): J^m(u) at interface i in layer k is
+/// (ω_k/2) Σ_l (2l + 1) χ_kl Λ_l^m(u) a_l(i), with
+/// a_l(i) = Σ_j w_j [Λ_l^m(μ_j) D_ij + Λ_l^m(−μ_j) U_ij] the same for every
+/// layer: the phase function's sum is done once per interface, not per view.
+pub(super) fn source_coefficients(s: &Streams, m: usize, down: &[Vec<f64>], up: &[Vec<f64>]) -> Vec<Vec<f64>> {
+    let plus = lambdas(&s.mu, m, s.lmax);
+    let minus = lambdas(&s.mu.iter().map(|u| -u).collect::<Vec<_>>(), m, s.lmax);
+    down.iter()
+        .zip(up)
+        .map(|(d, u)| {
+            (0..=s.lmax).map(|l| (0..s.n()).map(|j| s.w[j] * (plus[j][l] * d[j] + minus[j][l] * u[j])).sum()).collect()
+        })
+        .collect()
+}
+
+/// The source J^m of layer `l` at an interface with coefficients `a`, for
+/// Λ^m at the view's cosine there.
+pub(super) fn source(l: &Scaled, m: usize, lmax: usize, lam: &[f64], a: &[f64]) -> f64 {
+    0.5 * l.omega * (m..=lmax).map(|k| (2 * k + 1) as f64 * l.chi[k] * lam[k] * a[k]).sum::<f64>()
+}
+
+/// Each layer's source, linear in optical path `x` across it between
+/// `j_top` and `j_base`, seen from below its base:
+/// ∫₀ˣ J(s) e^{−s} ds with s the path from the base.
+pub(super) fn through_layer(j_top: f64, j_base: f64, x: f64) -> f64 {
+    let e = (-x).exp();
+    // (1 − e^{−x}) / x, by its series for thin layers.
+    let q = if x < 1e-5 { 1.0 - 0.5 * x + x * x / 6.0 } else { -(-x).exp_m1() / x };
+    j_base * (1.0 - q) + j_top * (q - e)
+}
+
 /// The mode-m radiance of the light scattered two or more times at each
 /// view, and (mode 0) the diffuse irradiance on the ground.
 fn multiple_scattering_mode(
@@ -238,68 +366,10 @@ fn multiple_scattering_mode(
     m: usize,
     paths: &Paths,
 ) -> (Vec<f64>, f64) {
-    let n = s.n();
-    let nl = layers.len();
-    let ops: Vec<Operator> =
-        layers.iter().zip(&paths.secant).map(|(l, &sec)| layer(s, m, l.tau, l.omega, &l.chi, mu0, sec)).collect();
-    let beam = &paths.beam;
-    // From the ground up.
-    let mut rg = vec![Mat::zeros(n); nl + 1];
-    let mut ug = vec![vec![0.0; n]; nl + 1];
-    if m == 0 && albedo > 0.0 {
-        for i in 0..n {
-            for j in 0..n {
-                rg[nl].set(i, j, 2.0 * albedo * s.w[j] * s.mu[j]);
-            }
-            ug[nl][i] = albedo * mu0 * beam[nl] / PI;
-        }
-    }
-    for k in (0..nl).rev() {
-        let op = &ops[k];
-        let g = rg[k + 1].mul(&op.r).one_minus().lu().expect("the medium below reflects less than all");
-        // Light entering layer k+1's top from below... (layer k spans interfaces k and k+1).
-        let below = rg[k + 1].mul_vec(&op.s_down);
-        let src: Vec<f64> = below.iter().zip(&ug[k + 1]).map(|(a, b)| beam[k] * a + b).collect();
-        let up_into = g.solve_vec(&src);
-        let t_up = op.t.mul_vec(&up_into);
-        ug[k] = t_up.iter().zip(&op.s_up).map(|(a, b)| a + beam[k] * b).collect();
-        rg[k] = op.r.add_scaled(&op.t.mul(&g.solve(&rg[k + 1].mul(&op.t))), 1.0);
-    }
-    // From the top down, and the fields at each interface.
-    let mut rs = Mat::zeros(n);
-    let mut ds = vec![0.0; n];
-    let mut down = vec![vec![0.0; n]; nl + 1];
-    let mut up = vec![vec![0.0; n]; nl + 1];
-    for k in 0..=nl {
-        if k > 0 {
-            let op = &ops[k - 1];
-            let g = rs.mul(&op.r).one_minus().lu().expect("the medium above reflects less than all");
-            let rsu = rs.mul_vec(&op.s_up);
-            let into = g.solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + beam[k - 1] * r).collect::<Vec<_>>());
-            let t_into = op.t.mul_vec(&into);
-            ds = t_into.iter().zip(&op.s_down).map(|(a, b)| a + beam[k - 1] * b).collect();
-            rs = op.r.add_scaled(&op.t.mul(&g.solve(&rs.mul(&op.t))), 1.0);
-        }
-        let g = rs.mul(&rg[k]).one_minus().lu().expect("the two sides reflect less than all");
-        let rsu = rs.mul_vec(&ug[k]);
-        down[k] = g.solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + r).collect::<Vec<_>>());
-        let rgd = rg[k].mul_vec(&down[k]);
-        up[k] = rgd.iter().zip(&ug[k]).map(|(a, b)| a + b).collect();
-    }
+    let (n, nl) = (s.n(), layers.len());
+    let (down, up) = ModeMatrices::new(s, layers, albedo, m).fields(s, albedo, mu0, paths);
     let diffuse_flux = 2.0 * PI * (0..n).map(|j| s.w[j] * s.mu[j] * down[nl][j]).sum::<f64>();
-    // The source at a view cosine u and interface i is
-    // J = (ω/2) Σ_l (2l + 1) χ_l Λ_l^m(u) a_l(i), with
-    // a_l(i) = Σ_j w_j [Λ_l^m(μ_j) D_ij + Λ_l^m(−μ_j) U_ij] the same for every
-    // layer: the phase function's sum is done once per interface, not per view.
-    let plus = lambdas(&s.mu, m, s.lmax);
-    let minus = lambdas(&s.mu.iter().map(|u| -u).collect::<Vec<_>>(), m, s.lmax);
-    let a: Vec<Vec<f64>> = (0..=nl)
-        .map(|i| {
-            (0..=s.lmax)
-                .map(|l| (0..n).map(|j| s.w[j] * (plus[j][l] * down[i][j] + minus[j][l] * up[i][j])).sum())
-                .collect()
-        })
-        .collect();
+    let a = source_coefficients(s, m, &down, &up);
     let radiance = paths
         .views
         .iter()
@@ -314,23 +384,15 @@ fn multiple_scattering_mode(
                 }
                 which.push(lam.len() - 1);
             }
-            let j_at = |l: &Scaled, i: usize| -> f64 {
-                let lv = &lam[which[i]];
-                0.5 * l.omega * (m..=s.lmax).map(|k| (2 * k + 1) as f64 * l.chi[k] * lv[k] * a[i][k]).sum::<f64>()
-            };
-            // From the ground up: each layer's source, linear in optical
-            // path across it, attenuated by the layers below.
+            // From the ground up: each layer's source, attenuated by the
+            // layers below.
             let (mut radiance, mut below) = (0.0f64, 0.0f64);
             for k in (0..nl).rev() {
                 let l = &layers[k];
-                let (j_top, j_base) = (j_at(l, k), j_at(l, k + 1));
-                let x = optical[k];
-                let e = (-x).exp();
-                // (1 − e^{−x}) / x, by its series for thin layers.
-                let q = if x < 1e-5 { 1.0 - 0.5 * x + x * x / 6.0 } else { -(-x).exp_m1() / x };
-                let through = j_base * (1.0 - q) + j_top * (q - e);
-                radiance += through * (-below).exp();
-                below += x;
+                let j_top = source(l, m, s.lmax, &lam[which[k]], &a[k]);
+                let j_base = source(l, m, s.lmax, &lam[which[k + 1]], &a[k + 1]);
+                radiance += through_layer(j_top, j_base, optical[k]) * (-below).exp();
+                below += optical[k];
             }
             radiance
         })

@@ -25,7 +25,7 @@
 //! copy lit by the beam that crossed the upper, e^{−τ/μ₀}.
 
 use super::legendre::normalised_associated;
-use super::linalg::Mat;
+use super::linalg::{Lu, Mat};
 use std::f64::consts::PI;
 
 /// The thickest sub-layer the diamond rule starts from.
@@ -81,77 +81,123 @@ pub struct Operator {
 /// layer's average secant along the sun's curved path in shells
 /// (pseudo-spherical, as DISORT's CHAPMN).
 pub fn layer(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64], mu0: f64, secant: f64) -> Operator {
-    let n = s.n();
-    let plus = lambdas(&s.mu, m, s.lmax);
-    let minus: Vec<f64> = s.mu.iter().map(|u| -u).collect();
-    let minus = lambdas(&minus, m, s.lmax);
-    let beam = lambdas(&[mu0], m, s.lmax);
-    let pp = mode_phase(chi, &plus, &plus, m, s.lmax);
-    let pm = mode_phase(chi, &plus, &minus, m, s.lmax);
-    let q_down = mode_phase(chi, &plus, &beam, m, s.lmax);
-    let q_up = mode_phase(chi, &minus, &beam, m, s.lmax);
-    let k_m = if m == 0 { 1.0 } else { 2.0 };
-    let q = |v: &Vec<Vec<f64>>, i: usize| omega * k_m * v[i][0] / (4.0 * PI);
-
-    let doublings = if tau > DIAMOND_TAU { (tau / DIAMOND_TAU).log2().ceil() as u32 } else { 0 };
-    let delta = tau / 2f64.powi(doublings as i32);
-    // Diamond start: a = (δ/2) M⁻¹ (I − (ω/2) P⁺⁺ W), b = (δ/2) M⁻¹ (ω/2) P⁺⁻ W.
-    let (mut a, mut b) = (Mat::zeros(n), Mat::zeros(n));
-    for i in 0..n {
-        let h = 0.5 * delta / s.mu[i];
-        for j in 0..n {
-            let diag = if i == j { 1.0 } else { 0.0 };
-            a.set(i, j, h * (diag - 0.5 * omega * pp[i][j] * s.w[j]));
-            b.set(i, j, h * 0.5 * omega * pm[i][j] * s.w[j]);
-        }
-    }
-    let id = Mat::identity(n);
-    let p1 = id.add_scaled(&a, 1.0).add_scaled(&b, -1.0).lu().expect("diamond start is regular");
-    let p2 = id.add_scaled(&a, 1.0).add_scaled(&b, 1.0).lu().expect("diamond start is regular");
-    let x = p1.solve(&id.add_scaled(&a, -1.0).add_scaled(&b, 1.0));
-    let y = p2.solve(&id.add_scaled(&a, -1.0).add_scaled(&b, -1.0));
-    let mut r = x.add_scaled(&y, -1.0);
-    let mut t = x.add_scaled(&y, 1.0);
-    for v in r.a.iter_mut().chain(t.a.iter_mut()) {
-        *v *= 0.5;
-    }
-    let e_mean = 0.5 * (1.0 + (-delta * secant).exp());
-    let qd: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&q_down, i) / s.mu[i]).collect();
-    let qu: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&q_up, i) / s.mu[i]).collect();
-    let sum = p1.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d + u).collect::<Vec<_>>());
-    let diff = p2.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d - u).collect::<Vec<_>>());
-    let mut op = Operator {
-        r,
-        t,
-        s_down: sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a + b)).collect(),
-        s_up: sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a - b)).collect(),
-    };
-    let mut thickness = delta;
-    for _ in 0..doublings {
-        op = double(&op, (-thickness * secant).exp());
-        thickness *= 2.0;
-    }
-    op
+    let matrices = LayerMatrices::new(s, m, tau, omega, chi);
+    let (s_down, s_up) = matrices.sources(s, mu0, secant);
+    Operator { r: matrices.r.clone(), t: matrices.t.clone(), s_down, s_up }
 }
 
-/// Two copies of a symmetric layer, the lower lit by the beam attenuated by
-/// `e` across the upper.
-fn double(op: &Operator, e: f64) -> Operator {
-    let g = op.r.mul(&op.r).one_minus().lu().expect("I − R R is regular for a layer that absorbs or transmits");
-    let rs: Vec<f64> = op.r.mul_vec(&op.s_up);
-    let d = g.solve_vec(&op.s_down.iter().zip(&rs).map(|(s, r)| s + e * r).collect::<Vec<_>>());
-    let rd = op.r.mul_vec(&d);
-    let u: Vec<f64> = rd.iter().zip(&op.s_up).map(|(a, b)| a + e * b).collect();
-    let td = op.t.mul_vec(&d);
-    let tu = op.t.mul_vec(&u);
-    let grt = g.solve(&op.r.mul(&op.t));
-    let gt = g.solve(&op.t);
-    Operator {
-        r: op.r.add_scaled(&op.t.mul(&grt), 1.0),
-        t: op.t.mul(&gt),
-        s_down: td.iter().zip(&op.s_down).map(|(a, b)| a + e * b).collect(),
-        s_up: op.s_up.iter().zip(&tu).map(|(a, b)| a + b).collect(),
+/// The part of a layer's operator that no sun changes: R and T, and what
+/// the beam's sources need from the diamond start and from each doubling
+/// (so that many suns share one set of matrices).
+#[derive(Debug, Clone)]
+pub struct LayerMatrices {
+    pub r: Mat,
+    pub t: Mat,
+    /// The diamond start's two factorised systems (module documentation).
+    start: (Lu, Lu),
+    /// The thin sub-layer the diamond rule starts from.
+    delta: f64,
+    /// R, T and G = (I − R R)⁻¹ (factorised) of each copy before it is
+    /// doubled.
+    levels: Vec<(Mat, Mat, Lu)>,
+    /// (ω k_m / 4π) (2l + 1) χ_l Λ_l^m(±μ_i): with Λ_l^m(μ₀) it makes the
+    /// beam's source into the downward (`plus`) and upward streams.
+    plus: Vec<Vec<f64>>,
+    minus: Vec<Vec<f64>>,
+    m: usize,
+}
+
+impl LayerMatrices {
+    pub fn new(s: &Streams, m: usize, tau: f64, omega: f64, chi: &[f64]) -> LayerMatrices {
+        let n = s.n();
+        let plus = lambdas(&s.mu, m, s.lmax);
+        let minus: Vec<f64> = s.mu.iter().map(|u| -u).collect();
+        let minus = lambdas(&minus, m, s.lmax);
+        let pp = mode_phase(chi, &plus, &plus, m, s.lmax);
+        let pm = mode_phase(chi, &plus, &minus, m, s.lmax);
+        let k_m = if m == 0 { 1.0 } else { 2.0 };
+        let weigh = |lam: &Vec<Vec<f64>>| -> Vec<Vec<f64>> {
+            lam.iter()
+                .map(|a| {
+                    (0..=s.lmax)
+                        .map(
+                            |l| if l < m { 0.0 } else { omega * k_m / (4.0 * PI) * (2 * l + 1) as f64 * chi[l] * a[l] },
+                        )
+                        .collect()
+                })
+                .collect()
+        };
+
+        let doublings = if tau > DIAMOND_TAU { (tau / DIAMOND_TAU).log2().ceil() as u32 } else { 0 };
+        let delta = tau / 2f64.powi(doublings as i32);
+        // Diamond start: a = (δ/2) M⁻¹ (I − (ω/2) P⁺⁺ W), b = (δ/2) M⁻¹ (ω/2) P⁺⁻ W.
+        let (mut a, mut b) = (Mat::zeros(n), Mat::zeros(n));
+        for i in 0..n {
+            let h = 0.5 * delta / s.mu[i];
+            for j in 0..n {
+                let diag = if i == j { 1.0 } else { 0.0 };
+                a.set(i, j, h * (diag - 0.5 * omega * pp[i][j] * s.w[j]));
+                b.set(i, j, h * 0.5 * omega * pm[i][j] * s.w[j]);
+            }
+        }
+        let id = Mat::identity(n);
+        let p1 = id.add_scaled(&a, 1.0).add_scaled(&b, -1.0).lu().expect("diamond start is regular");
+        let p2 = id.add_scaled(&a, 1.0).add_scaled(&b, 1.0).lu().expect("diamond start is regular");
+        let x = p1.solve(&id.add_scaled(&a, -1.0).add_scaled(&b, 1.0));
+        let y = p2.solve(&id.add_scaled(&a, -1.0).add_scaled(&b, -1.0));
+        let mut r = x.add_scaled(&y, -1.0);
+        let mut t = x.add_scaled(&y, 1.0);
+        for v in r.a.iter_mut().chain(t.a.iter_mut()) {
+            *v *= 0.5;
+        }
+        let mut levels = Vec::with_capacity(doublings as usize);
+        for _ in 0..doublings {
+            let g = r.mul(&r).one_minus().lu().expect("I − R R is regular for a layer that absorbs or transmits");
+            let (r2, t2) = (r.add_scaled(&t.mul(&g.solve(&r.mul(&t))), 1.0), t.mul(&g.solve(&t)));
+            levels.push((r, t, g));
+            (r, t) = (r2, t2);
+        }
+        LayerMatrices { r, t, start: (p1, p2), delta, levels, plus: weigh(&plus), minus: weigh(&minus), m }
     }
+
+    /// The diffuse radiance the layer sends down out of its base and up out
+    /// of its top, per unit of a beam of cosine `mu0` at its top (F₀ = 1)
+    /// that loses e^{−secant t} across a vertical optical depth t of it.
+    /// A negative `mu0` is a beam that travels up (a sun below the local
+    /// horizon lighting the air above the Earth's shadow), still weakening
+    /// downward through the layer as `secant` says.
+    pub fn sources(&self, s: &Streams, mu0: f64, secant: f64) -> (Vec<f64>, Vec<f64>) {
+        let n = s.n();
+        let beam = normalised_associated(s.lmax, self.m, mu0);
+        let q = |c: &Vec<Vec<f64>>, i: usize| -> f64 { c[i].iter().zip(&beam).map(|(a, b)| a * b).sum() };
+        let delta = self.delta;
+        let e_mean = 0.5 * (1.0 + (-delta * secant).exp());
+        let qd: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&self.plus, i) / s.mu[i]).collect();
+        let qu: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&self.minus, i) / s.mu[i]).collect();
+        let (p1, p2) = &self.start;
+        let sum = p1.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d + u).collect::<Vec<_>>());
+        let diff = p2.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d - u).collect::<Vec<_>>());
+        let mut down: Vec<f64> = sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a + b)).collect();
+        let mut up: Vec<f64> = sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a - b)).collect();
+        let mut thickness = delta;
+        for (r, t, g) in &self.levels {
+            (down, up) = double_sources(r, t, g, &down, &up, (-thickness * secant).exp());
+            thickness *= 2.0;
+        }
+        (down, up)
+    }
+}
+
+/// The beam's sources of two copies of a symmetric layer (R, T, G its
+/// matrices), the lower lit by the beam attenuated by `e` across the upper.
+fn double_sources(r: &Mat, t: &Mat, g: &Lu, down: &[f64], up: &[f64], e: f64) -> (Vec<f64>, Vec<f64>) {
+    let rs: Vec<f64> = r.mul_vec(up);
+    let d = g.solve_vec(&down.iter().zip(&rs).map(|(s, r)| s + e * r).collect::<Vec<_>>());
+    let rd = r.mul_vec(&d);
+    let u: Vec<f64> = rd.iter().zip(up).map(|(a, b)| a + e * b).collect();
+    let td = t.mul_vec(&d);
+    let tu = t.mul_vec(&u);
+    (td.iter().zip(down).map(|(a, b)| a + e * b).collect(), up.iter().zip(&tu).map(|(a, b)| a + b).collect())
 }
 
 #[cfg(test)]
