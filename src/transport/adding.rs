@@ -79,7 +79,7 @@ impl Diffuse {
     /// mode-0 radiance at every node. A sun below the horizon lights
     /// nothing in a plane-parallel atmosphere.
     pub fn solve(layers: &Layers, streams: usize, mu0: f64, nodes: Vec<f64>) -> Diffuse {
-        if mu0 <= 0.0 {
+        if mu0 <= 0.0 && layers.shell_radius_km.is_none() {
             return Diffuse { modes: vec![vec![0.0; nodes.len()]], nodes, ground_irradiance: 0.0 };
         }
         let s = Streams::new(streams);
@@ -91,7 +91,7 @@ impl Diffuse {
         for m in 0..2 * streams {
             let (mode, diffuse_flux) = multiple_scattering_mode(&s, &scaled, layers.ground_albedo, mu0, m, &paths);
             if m == 0 {
-                ground_irradiance = mu0 * paths.beam[scaled.len()] + diffuse_flux;
+                ground_irradiance = mu0.max(0.0) * paths.beam[scaled.len()] + diffuse_flux;
             }
             let largest = mode
                 .iter()
@@ -145,7 +145,7 @@ pub(super) fn delta_m(layers: &Layers, moments: usize) -> Vec<Scaled> {
 /// chord between the shells, and a view's cosine grows with altitude.
 pub(super) struct Paths {
     /// The direct beam's transmittance to each interface, top down.
-    beam: Vec<f64>,
+    pub(super) beam: Vec<f64>,
     /// Each layer's average secant along the sun's path (DISORT's CHAPMN):
     /// the slant optical depth across it per unit of its vertical depth.
     secant: Vec<f64>,
@@ -155,7 +155,7 @@ pub(super) struct Paths {
 }
 
 impl Paths {
-    fn new(layers: &Layers, scaled: &[Scaled], mu0: f64, view_mu: &[f64]) -> Paths {
+    pub(super) fn new(layers: &Layers, scaled: &[Scaled], mu0: f64, view_mu: &[f64]) -> Paths {
         let nl = scaled.len();
         let radius = layers.shell_radius_km;
         let z: Vec<f64> = std::iter::once(layers.layers.first().map_or(0.0, |l| l.top_km))
@@ -163,12 +163,18 @@ impl Paths {
             .collect();
         // Scaled extinction of each (homogeneous) layer, km⁻¹.
         let sigma: Vec<f64> = scaled.iter().enumerate().map(|(k, l)| l.tau / (z[k] - z[k + 1])).collect();
-        let slant: Vec<f64> =
-            (0..=nl).map(|i| (0..i).map(|j| sigma[j] * chord_km(radius, z[i], mu0, z[j + 1], z[j])).sum()).collect();
+        let slant: Vec<f64> = (0..=nl).map(|i| slant_to_sun(radius, &z, &sigma, z[i], mu0)).collect();
+        // The beam's profile across layer k: e^{−secant t} between its top's
+        // and its base's transmittance (where the Earth's shadow falls
+        // inside a layer, the beam is taken to die out within it).
         let secant = (0..nl)
             .map(|k| match radius {
-                Some(_) if scaled[k].tau > 0.0 => ((slant[k + 1] - slant[k]) / scaled[k].tau).max(1e-6),
-                _ => 1.0 / mu0,
+                Some(_) if scaled[k].tau > 0.0 && slant[k].is_finite() => {
+                    ((slant[k + 1] - slant[k]) / scaled[k].tau).clamp(1e-6, 1e6)
+                }
+                Some(_) => 1.0,
+                None if mu0 > 0.0 => 1.0 / mu0,
+                None => 1.0,
             })
             .collect();
         let views = view_mu
@@ -213,6 +219,38 @@ fn chord_km(radius: Option<f64>, z0: f64, u: f64, z_lo: f64, z_hi: f64) -> f64 {
             along(z_hi) - along(z_lo)
         }
     }
+}
+
+/// The optical depth (delta-M scaled extinctions `sigma` of the layers
+/// between interfaces `z`, top down) from altitude `z0` to the sun, whose
+/// zenith cosine there is `mu0`. A sun above the local horizon: the path
+/// straight up through the shells. A sun below it (shells only): the path
+/// dips to its tangent altitude b − R, b = (R + z₀) √(1 − μ₀²), crossing
+/// the shells between it and z₀ twice, unless the Earth is in the way
+/// (b < R: infinite, the point is in the Earth's shadow).
+fn slant_to_sun(radius: Option<f64>, z: &[f64], sigma: &[f64], z0: f64, mu0: f64) -> f64 {
+    let layers = z.windows(2).zip(sigma).map(|(w, &s)| (w[1], w[0], s));
+    let Some(r) = radius else {
+        return if mu0 > 0.0 {
+            layers.filter(|l| l.1 > z0).map(|(lo, hi, s)| s * (hi - lo.max(z0)) / mu0).sum()
+        } else {
+            f64::INFINITY
+        };
+    };
+    let b = (r + z0) * (1.0 - mu0 * mu0).max(0.0).sqrt();
+    if mu0 < 0.0 && b < r {
+        return f64::INFINITY;
+    }
+    let along = |z: f64| ((r + z) * (r + z) - b * b).max(0.0).sqrt();
+    let tangent_km = if mu0 < 0.0 { b - r } else { z0 };
+    layers
+        .map(|(lo, hi, s)| {
+            let above = if hi > z0 { along(hi) - along(lo.max(z0)) } else { 0.0 };
+            let (a, c) = (lo.max(tangent_km), hi.min(z0));
+            let dip = if c > a { 2.0 * (along(c) - along(a)) } else { 0.0 };
+            s * (above + dip)
+        })
+        .sum()
 }
 
 /// The zenith cosine at altitude `z` of a ray that leaves the ground at

@@ -13,6 +13,7 @@
 //! --method deterministic`. `legendre` and `linalg` are their arithmetic.
 
 pub mod adding;
+pub mod columns;
 pub mod layers;
 pub mod legendre;
 pub mod linalg;
