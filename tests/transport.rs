@@ -249,7 +249,8 @@ fn the_method_flag_renders_or_says_why_not() {
 /// tracer reference (`examples/path_tracer_reference.rs`), every case:
 /// per direction, the relative difference in Y and its z against the
 /// reference's standard error, pushed into `family`; the labels of those
-/// beyond `bound`.
+/// beyond `bound` where the reference's relative standard error is below
+/// `bound` / 3 (where it can tell).
 fn against_path_tracer(file: &str, resolution: &Resolution, bound: f64, family: &mut Family) -> Vec<String> {
     let reference: Value = serde_json::from_str(&std::fs::read_to_string(root().join(file)).unwrap()).unwrap();
     let atm = Atmosphere::load(&root().join(reference["atmosphere"].as_str().unwrap())).unwrap();
@@ -276,13 +277,13 @@ fn against_path_tracer(file: &str, resolution: &Resolution, bound: f64, family: 
             let (y, se) = (m["xyz"][1].as_f64().unwrap(), m["xyz_stderr"][1].as_f64().unwrap());
             let (rel, z) = (d.xyz[1] / y - 1.0, (d.xyz[1] - y) / se);
             let label = format!(
-                "sun {sun}, view {dir:?}: Y {:.5e} against {y:.5e} ± {:.2} % ({:+.2} %)",
+                "{file}: sun {sun}, view {dir:?}: Y {:.5e} against {y:.5e} ± {:.2} % ({:+.2} %)",
                 d.xyz[1],
                 100.0 * se / y,
                 100.0 * rel
             );
             eprintln!("{label}: z {z:+.1}");
-            if rel.abs() > bound {
+            if rel.abs() > bound && se / y < bound / 3.0 {
                 beyond.push(label.clone());
             }
             family.push(label, z);
@@ -293,22 +294,55 @@ fn against_path_tracer(file: &str, resolution: &Resolution, bound: f64, family: 
 
 /// Issue 37's judge of the spherical skies by day, for `make validate`:
 /// the deterministic render (32 streams a hemisphere) against the path
-/// tracer converged to 0.05 to 0.3 % (65 536 samples) on 12 directions,
-/// `clear.toml` with the sun at 20°, 60° and 85° from the zenith
-/// (`tests/reference/path_tracer_clear_day.json`); every direction within
-/// 1 % and within the Šidák threshold of the family at a false-alarm rate
-/// of 1 %, and no common bias (the aggregate z of the 36 within ±4, a
-/// false alarm of 6e-5).
+/// tracer at 65 536 samples on 12 directions (standard errors 0.05 to
+/// 0.3 % in `clear.toml`, 0.1 to 1.3 % in `hazed.toml`), the sun at 20°,
+/// 60° and 85° from the zenith
+/// (`tests/reference/path_tracer_{clear,hazed}_day.json`); every
+/// direction within the Šidák threshold of the family at a false-alarm
+/// rate of 1 % and within 1 % where the reference can tell (standard error
+/// below 0.33 %), and no common bias (the aggregate z of the 72 within ±4,
+/// a false alarm of 6e-5).
 #[test]
 #[ignore = "32 streams on 36 directions: minutes (make validate)"]
 fn deterministic_daylight_against_a_converged_path_tracer() {
     let mut family = Family::default();
     let resolution = Resolution { streams: 32, ..Default::default() };
-    let beyond = against_path_tracer("tests/reference/path_tracer_clear_day.json", &resolution, 0.01, &mut family);
+    let mut beyond = Vec::new();
+    for sky in ["clear", "hazed"] {
+        let file = format!("tests/reference/path_tracer_{sky}_day.json");
+        beyond.extend(against_path_tracer(&file, &resolution, 0.01, &mut family));
+    }
     let failures = family.failures(0.01);
     let aggregate = family.aggregate();
     eprintln!("aggregate z {aggregate:+.2}");
     assert!(failures.is_empty() && beyond.is_empty(), "beyond 1 %: {beyond:#?}\nbeyond the threshold: {failures:#?}");
+    assert!(aggregate.abs() < 4.0, "a common bias: aggregate z {aggregate:+.2}");
+}
+
+/// Issue 37's twilight judge, for `make validate`: the deterministic
+/// render (16 streams, columns every 1°) against the path tracer at 65 536
+/// samples on 12 directions (`tests/reference/path_tracer_clear_twilight.json`,
+/// `clear.toml`, the sun 91°, 93°, 96° and 99° from the zenith; the
+/// samples' cost is in the file): every direction within the Šidák
+/// threshold of the family at a false-alarm rate of 1 % and within 1 %
+/// where the reference's standard error can tell (below 0.33 %), and no
+/// common bias (aggregate z within ±4).
+#[test]
+#[ignore = "the twilight judge: minutes (make validate)"]
+fn deterministic_twilight_against_the_path_tracer() {
+    let mut family = Family::default();
+    let beyond = against_path_tracer(
+        "tests/reference/path_tracer_clear_twilight.json",
+        &Resolution::default(),
+        0.01,
+        &mut family,
+    );
+    let failures = family.failures(0.01);
+    let aggregate = family.aggregate();
+    eprintln!("aggregate z {aggregate:+.2}");
+    let told: Vec<&String> =
+        beyond.iter().filter(|l| l.contains("± 0.0") || l.contains("± 0.1") || l.contains("± 0.2")).collect();
+    assert!(failures.is_empty() && told.is_empty(), "beyond 1 %: {told:#?}\nbeyond the threshold: {failures:#?}");
     assert!(aggregate.abs() < 4.0, "a common bias: aggregate z {aggregate:+.2}");
 }
 
