@@ -235,6 +235,7 @@ fn the_method_flag_renders_or_says_why_not() {
     let bytes = std::fs::read(&exr).unwrap();
     assert!(bytes.windows(13).any(|w| w == b"deterministic"), "the EXR's metadata names the method");
     for (args, says) in [
+        (&["atmospheres/clear.toml", "--sun-zenith-deg", "95"][..], "twilight"),
         (&["tests/atmospheres/disort_rayleigh_hg.toml", "--sun-zenith-deg", "40", "--altitude-m", "500"][..], "ground"),
         (&["tests/atmospheres/disort_rayleigh_hg.toml", "--sun-zenith-deg", "40", "--denoise"][..], "--denoise"),
     ] {

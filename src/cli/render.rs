@@ -238,7 +238,7 @@ pub fn run(a: RenderArgs) -> Result<ExitCode> {
         .filter(|&t| t > 0)
         .unwrap_or_else(|| std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1));
     if a.method == Method::Deterministic {
-        if let Err(e) = sky::transport::render::check(&settings.view) {
+        if let Err(e) = sky::transport::render::check_for_users(atm.planet.geometry, &settings.view) {
             return usage(format!("--method deterministic: {e}"));
         }
         return run_deterministic(&a, &outputs, threads, (atm, bundle), &settings);

@@ -23,6 +23,7 @@
 
 use super::columns::{self, Columns};
 use super::layers::{Grading, Layers};
+use crate::atmosphere::Geometry;
 use crate::render::medium::Spectral;
 use crate::render::single::{xyz_of, SingleScattering};
 use crate::render::{Image, PixelResult, Scene, View};
@@ -58,14 +59,37 @@ impl Default for Resolution {
 /// What the deterministic solver cannot render yet.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Unsupported {
+    #[error(
+        "the deterministic solver is not accurate at twilight yet: in spherical shells it renders suns up to 90 deg \
+         from the zenith, not {0} deg (at 93 deg it is 6 to 21 % too dark; docs/rendering.md); twilight renders \
+         with --method monte-carlo"
+    )]
+    Twilight(f64),
     #[error("the deterministic solver sees from the ground so far (--altitude-m 0), not from {0} m")]
     Altitude(f64),
     #[error("the deterministic solver renders no fog yet; fog renders with --method monte-carlo")]
     Fog,
 }
 
-/// Why `view` cannot be rendered
-/// deterministically, if it cannot.
+/// The lowest sun `sky render --method deterministic` accepts in spherical
+/// shells: beyond it the columns miss the light carried sideways into the
+/// Earth's shadow (the twilight judge in `tests/transport.rs`: −0.1 to
+/// −6.8 % at 91°, −6 to −21 % at 93°). `render` itself renders any sun, so
+/// that the judges can measure it.
+pub const MAX_SUN_ZENITH_DEG: f64 = 90.0;
+
+/// Why `sky render` refuses `view` of an atmosphere of this geometry with
+/// the deterministic method, if it does: what `render` cannot do, and
+/// twilight, which it does too poorly.
+pub fn check_for_users(geometry: Geometry, view: &View) -> Result<(), Unsupported> {
+    let twilight = view.parts().iter().map(|(_, p)| p.sun_zenith_deg).find(|&z| z > MAX_SUN_ZENITH_DEG);
+    if let (Geometry::Spherical, Some(z)) = (geometry, twilight) {
+        return Err(Unsupported::Twilight(z));
+    }
+    check(view)
+}
+
+/// Why `view` cannot be rendered deterministically, if it cannot.
 pub fn check(view: &View) -> Result<(), Unsupported> {
     if view.altitude_m != 0.0 {
         return Err(Unsupported::Altitude(view.altitude_m));
