@@ -25,7 +25,7 @@
 //! solution to 88° and fails beyond 92°; what the columns leave out is the
 //! light carried sideways between columns, the structure of deep twilight.
 
-use super::adding::{delta_m, source, source_coefficients, through_layer, ModeMatrices, Paths, Scaled};
+use super::adding::{delta_m, source_coefficients, through_layer, ModeMatrices, Paths, Scaled};
 use super::layers::Layers;
 use super::legendre::normalised_associated;
 use super::operator::Streams;
@@ -38,8 +38,11 @@ pub struct Columns {
     /// The local sun zenith angle of each column, radians, increasing.
     pub zenith_rad: Vec<f64>,
     /// `coef[c][m][i]`: the mode-m coefficients a_l (l = 0..=lmax) of
-    /// column c at interface i (`adding::source_coefficients`).
-    coef: Vec<Vec<Vec<Vec<f64>>>>,
+    /// column c at interface i (`adding::source_coefficients`), weighted by
+    /// the phase function of the layer above the interface (`[0]`, empty at
+    /// the top) and of the layer below it (`[1]`, empty at the ground):
+    /// (ω/2) (2l + 1) χ_l a_l, so that J^m = Σ_l Λ_l^m(u) times these.
+    coef: Vec<Vec<Vec<[Vec<f64>; 2]>>>,
     /// The irradiance on a horizontal ground under each column.
     pub ground_irradiance: Vec<f64>,
     layers: Vec<Scaled>,
@@ -57,7 +60,15 @@ impl Columns {
         let scaled = delta_m(layers, 2 * streams);
         let nl = scaled.len();
         let paths: Vec<Paths> = zenith_rad.iter().map(|z| Paths::new(layers, &scaled, z.cos(), &[])).collect();
-        let mut coef: Vec<Vec<Vec<Vec<f64>>>> = vec![Vec::new(); zenith_rad.len()];
+        let mut coef: Vec<Vec<Vec<[Vec<f64>; 2]>>> = vec![Vec::new(); zenith_rad.len()];
+        let mut mode_zero_norm = vec![0.0; zenith_rad.len()];
+        // (ω/2) (2l + 1) χ_l a_l of layer k, zero below l = m.
+        let weigh = |k: usize, m: usize, a: &[f64]| -> Vec<f64> {
+            let l = &scaled[k];
+            (0..=s.lmax)
+                .map(|j| if j < m { 0.0 } else { 0.5 * l.omega * (2 * j + 1) as f64 * l.chi[j] * a[j] })
+                .collect()
+        };
         let mut ground_irradiance = vec![0.0; zenith_rad.len()];
         let norm = |a: &[Vec<f64>]| a.iter().map(|x| x.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
         let mut quiet = 0;
@@ -72,10 +83,19 @@ impl Columns {
                     ground_irradiance[c] = mu0.max(0.0) * paths[c].beam[nl] + diffuse;
                 }
                 let a = source_coefficients(&s, m, &down, &up);
-                if m > 0 {
-                    largest = largest.max(norm(&a) / norm(&coef[c][0]).max(1e-300));
+                if m == 0 {
+                    mode_zero_norm[c] = norm(&a);
+                } else {
+                    largest = largest.max(norm(&a) / mode_zero_norm[c].max(1e-300));
                 }
-                coef[c].push(a);
+                let weighted = (0..=nl)
+                    .map(|i| {
+                        let above = if i > 0 { weigh(i - 1, m, &a[i]) } else { Vec::new() };
+                        let below = if i < nl { weigh(i, m, &a[i]) } else { Vec::new() };
+                        [above, below]
+                    })
+                    .collect();
+                coef[c].push(weighted);
             }
             quiet = if m > 0 && largest < 1e-6 { quiet + 1 } else { 0 };
             if quiet == 2 {
@@ -109,7 +129,7 @@ impl Columns {
         // base of the layer above (`.0`) and as the top of the layer below
         // (`.1`).
         let mut at = vec![vec![(0.0, 0.0); nl + 1]; phis.len()];
-        let mut jm: Vec<Vec<[f64; 2]>> = Vec::new();
+        let mut jm: Vec<[f64; 2]> = Vec::new();
         for i in 0..=nl {
             let (u, arc) = self.ray_at(mu, self.z_km[i]);
             let sin_u = (1.0 - u * u).max(0.0).sqrt();
@@ -118,16 +138,14 @@ impl Columns {
             let (lo, _) = self.bracket((sun_zenith_rad - arc).max(0.0));
             let (hi, w_hi) = self.bracket((sun_zenith_rad + arc).min(PI));
             let hi = if w_hi > 0.0 { hi + 1 } else { hi };
-            // J^m of each column on each side.
+            // J^m of each column on each side: `jm[(c − lo) modes + m]`.
             jm.clear();
             for c in lo..=hi {
-                let coef = &self.coef[c];
-                let side = |k: usize| -> Vec<f64> {
-                    (0..modes).map(|m| source(&self.layers[k], m, self.lmax, &lam[m], &coef[m][i])).collect()
-                };
-                let above = if i > 0 { side(i - 1) } else { vec![0.0; modes] };
-                let below = if i < nl { side(i) } else { vec![0.0; modes] };
-                jm.push(above.into_iter().zip(below).map(|(a, b)| [a, b]).collect());
+                for (m, lam_m) in lam.iter().enumerate() {
+                    let w = &self.coef[c][m][i];
+                    let dot = |w: &[f64]| -> f64 { w.iter().zip(lam_m).skip(m).map(|(a, b)| a * b).sum() };
+                    jm.push([dot(&w[0]), dot(&w[1])]);
+                }
             }
             for (p, cos_phi) in cos_phis.iter().enumerate() {
                 let cos_s = (arc.cos() * cos0 + arc.sin() * sin0 * cos_phi).clamp(-1.0, 1.0);
@@ -144,7 +162,7 @@ impl Columns {
                 let value = |c: usize| -> [f64; 2] {
                     let (mut prev, mut cos_m) = (cos_local, 1.0);
                     let mut sum = [0.0; 2];
-                    for j in &jm[c - lo] {
+                    for j in &jm[(c - lo) * modes..(c - lo + 1) * modes] {
                         sum[0] += j[0] * cos_m;
                         sum[1] += j[1] * cos_m;
                         (prev, cos_m) = (cos_m, 2.0 * cos_local * cos_m - prev);
