@@ -467,3 +467,49 @@ fn single_scattering(layers: &Layers, mu0: f64, v: &View) -> f64 {
     }
     sum
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The optical depth to the sun through the shells against a plain
+    /// march along the straight line (steps of 5 m), for suns above and
+    /// below the local horizon; a sun whose line meets the ground leaves
+    /// the point in the Earth's shadow.
+    #[test]
+    fn the_slant_to_the_sun_is_the_straight_line_s() {
+        let radius = 6371.0;
+        let z = [100.0, 50.0, 20.0, 10.0, 5.0, 0.0];
+        let sigma = [0.001, 0.01, 0.05, 0.1, 0.2];
+        let sigma_at = |alt: f64| -> f64 {
+            z.windows(2).zip(&sigma).find(|(w, _)| alt >= w[1] && alt < w[0]).map_or(0.0, |(_, s)| *s)
+        };
+        let march = |z0: f64, mu0: f64| -> f64 {
+            let (dx, dy) = ((1.0 - mu0 * mu0).sqrt(), mu0);
+            let (step, mut sum) = (0.005, 0.0);
+            for k in 0.. {
+                let t = (k as f64 + 0.5) * step;
+                let (x, y) = (t * dx, radius + z0 + t * dy);
+                let alt = (x * x + y * y).sqrt() - radius;
+                if alt < 0.0 {
+                    return f64::INFINITY;
+                }
+                if alt > z[0] && y * dy + x * dx > 0.0 {
+                    return sum;
+                }
+                sum += sigma_at(alt) * step;
+            }
+            unreachable!()
+        };
+        for (z0, mu0) in [(0.0, 0.5), (7.0, 0.05), (30.0, -0.05), (60.0, -0.1), (12.0, -0.02), (10.0, -0.2)] {
+            let (got, want) = (slant_to_sun(Some(radius), &z, &sigma, z0, mu0), march(z0, mu0));
+            if want.is_infinite() {
+                assert!(got.is_infinite(), "altitude {z0}, sun cosine {mu0}: {got} where the Earth is in the way");
+            } else {
+                assert!((got / want - 1.0).abs() < 1e-3, "altitude {z0}, sun cosine {mu0}: {got} against {want}");
+            }
+        }
+        assert!(slant_to_sun(Some(radius), &z, &sigma, 10.0, -0.2).is_infinite());
+        assert!(slant_to_sun(None, &z, &sigma, 10.0, -0.01).is_infinite());
+    }
+}
