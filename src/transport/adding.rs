@@ -210,7 +210,7 @@ pub fn sun_transmittance(layers: &Layers, mu0: f64) -> f64 {
 /// centre `radius` below the ground, the difference of √((R + z)² − b²)
 /// between the ends, with b = (R + z0) √(1 − u²) the ray's impact
 /// parameter.
-fn chord_km(radius: Option<f64>, z0: f64, u: f64, z_lo: f64, z_hi: f64) -> f64 {
+pub(super) fn chord_km(radius: Option<f64>, z0: f64, u: f64, z_lo: f64, z_hi: f64) -> f64 {
     match radius {
         None => (z_hi - z_lo) / u,
         Some(r) => {
@@ -256,7 +256,7 @@ fn slant_to_sun(radius: Option<f64>, z: &[f64], sigma: &[f64], z0: f64, mu0: f64
 /// The zenith cosine at altitude `z` of a ray that leaves the ground at
 /// zenith cosine `u` > 0 (the same everywhere in a plane-parallel
 /// atmosphere; in shells its sine falls as R / (R + z)).
-fn cosine_at(radius: Option<f64>, u: f64, z: f64) -> f64 {
+pub(super) fn cosine_at(radius: Option<f64>, u: f64, z: f64) -> f64 {
     match radius {
         None => u,
         Some(r) => {

@@ -25,7 +25,7 @@
 //! solution to 88° and fails beyond 92°; what the columns leave out is the
 //! light carried sideways between columns, the structure of deep twilight.
 
-use super::adding::{delta_m, source_coefficients, through_layer, ModeMatrices, Paths, Scaled};
+use super::adding::{chord_km, cosine_at, delta_m, source_coefficients, through_layer, ModeMatrices, Paths, Scaled};
 use super::layers::Layers;
 use super::legendre::normalised_associated;
 use super::operator::Streams;
@@ -184,7 +184,8 @@ impl Columns {
         let optical: Vec<f64> = (0..nl)
             .map(|k| {
                 let l = &self.layers[k];
-                l.tau / (self.z_km[k] - self.z_km[k + 1]) * self.chord_km(mu, self.z_km[k + 1], self.z_km[k])
+                l.tau / (self.z_km[k] - self.z_km[k + 1])
+                    * chord_km(self.radius_km, 0.0, mu, self.z_km[k + 1], self.z_km[k])
             })
             .collect();
         at.iter()
@@ -224,28 +225,15 @@ impl Columns {
     /// altitude `z` km and the arc angle (radians) from the observer to the
     /// ground below it there.
     fn ray_at(&self, mu: f64, z: f64) -> (f64, f64) {
-        match self.radius_km {
-            None => (mu, 0.0),
+        let arc = match self.radius_km {
+            None => 0.0,
             Some(r) => {
                 let sin_v = (1.0 - mu * mu).max(0.0).sqrt();
                 let t = ((r + z) * (r + z) - r * r * sin_v * sin_v).max(0.0).sqrt() - r * mu;
-                let arc = libm::atan2(t * sin_v, r + t * mu);
-                let sine = r / (r + z) * sin_v;
-                ((1.0 - sine * sine).max(0.0).sqrt(), arc)
+                libm::atan2(t * sin_v, r + t * mu)
             }
-        }
-    }
-
-    /// The length of that ray between two altitudes, km.
-    fn chord_km(&self, mu: f64, z_lo: f64, z_hi: f64) -> f64 {
-        match self.radius_km {
-            None => (z_hi - z_lo) / mu,
-            Some(r) => {
-                let b2 = r * r * (1.0 - mu * mu);
-                let along = |z: f64| ((r + z) * (r + z) - b2).max(0.0).sqrt();
-                along(z_hi) - along(z_lo)
-            }
-        }
+        };
+        (cosine_at(self.radius_km, mu, z), arc)
     }
 }
 
