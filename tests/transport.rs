@@ -334,7 +334,7 @@ fn deterministic_twilight_against_the_path_tracer() {
     let mut family = Family::default();
     let beyond = against_path_tracer(
         "tests/reference/path_tracer_clear_twilight.json",
-        &Resolution::default(),
+        &Resolution { spherical: true, ..Resolution::default() },
         0.01,
         &mut family,
     );

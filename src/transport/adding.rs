@@ -228,7 +228,7 @@ pub(super) fn chord_km(radius: Option<f64>, z0: f64, u: f64, z_lo: f64, z_hi: f6
 /// dips to its tangent altitude b − R, b = (R + z₀) √(1 − μ₀²), crossing
 /// the shells between it and z₀ twice, unless the Earth is in the way
 /// (b < R: infinite, the point is in the Earth's shadow).
-fn slant_to_sun(radius: Option<f64>, z: &[f64], sigma: &[f64], z0: f64, mu0: f64) -> f64 {
+pub(super) fn slant_to_sun(radius: Option<f64>, z: &[f64], sigma: &[f64], z0: f64, mu0: f64) -> f64 {
     let layers = z.windows(2).zip(sigma).map(|(w, &s)| (w[1], w[0], s));
     let Some(r) = radius else {
         return if mu0 > 0.0 {

@@ -56,61 +56,42 @@ impl Columns {
     /// Solves every column, mode after mode, until two modes in a row
     /// change no column's source by more than 1e-6 of its mode 0.
     pub fn solve(layers: &Layers, streams: usize, zenith_rad: Vec<f64>) -> Columns {
-        let s = Streams::new(streams);
-        let scaled = delta_m(layers, 2 * streams);
+        let solution = Solution::new(layers, streams, &zenith_rad);
+        Columns::from_solution(layers, solution, zenith_rad)
+    }
+
+    /// The columns whose fields `solution` holds: each interface's
+    /// coefficients weighted by the phase functions of the layers on its
+    /// two sides.
+    pub(super) fn from_solution(layers: &Layers, solution: Solution, zenith_rad: Vec<f64>) -> Columns {
+        let Solution { s, scaled, a, ground_irradiance, .. } = solution;
         let nl = scaled.len();
-        let paths: Vec<Paths> = zenith_rad.iter().map(|z| Paths::new(layers, &scaled, z.cos(), &[])).collect();
-        let mut coef: Vec<Vec<Vec<[Vec<f64>; 2]>>> = vec![Vec::new(); zenith_rad.len()];
-        let mut mode_zero_norm = vec![0.0; zenith_rad.len()];
-        // (ω/2) (2l + 1) χ_l a_l of layer k, zero below l = m.
-        let weigh = |k: usize, m: usize, a: &[f64]| -> Vec<f64> {
-            let l = &scaled[k];
-            (0..=s.lmax)
-                .map(|j| if j < m { 0.0 } else { 0.5 * l.omega * (2 * j + 1) as f64 * l.chi[j] * a[j] })
-                .collect()
-        };
-        let mut ground_irradiance = vec![0.0; zenith_rad.len()];
-        let norm = |a: &[Vec<f64>]| a.iter().map(|x| x.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
-        let mut quiet = 0;
-        for m in 0..2 * streams {
-            let matrices = ModeMatrices::new(&s, &scaled, layers.ground_albedo, m);
-            let mut largest = 0.0f64;
-            for (c, zenith) in zenith_rad.iter().enumerate() {
-                let mu0 = zenith.cos();
-                let (down, up) = matrices.fields(&s, layers.ground_albedo, mu0, &paths[c]);
-                if m == 0 {
-                    let diffuse = 2.0 * PI * (0..s.n()).map(|j| s.w[j] * s.mu[j] * down[nl][j]).sum::<f64>();
-                    ground_irradiance[c] = mu0.max(0.0) * paths[c].beam[nl] + diffuse;
-                }
-                let a = source_coefficients(&s, m, &down, &up);
-                if m == 0 {
-                    mode_zero_norm[c] = norm(&a);
-                } else {
-                    largest = largest.max(norm(&a) / mode_zero_norm[c].max(1e-300));
-                }
-                let weighted = (0..=nl)
-                    .map(|i| {
-                        let above = if i > 0 { weigh(i - 1, m, &a[i]) } else { Vec::new() };
-                        let below = if i < nl { weigh(i, m, &a[i]) } else { Vec::new() };
-                        [above, below]
+        let coef = a
+            .iter()
+            .map(|column| {
+                column
+                    .iter()
+                    .enumerate()
+                    .map(|(m, interfaces)| {
+                        (0..=nl)
+                            .map(|i| {
+                                let above =
+                                    if i > 0 { weigh(&scaled[i - 1], s.lmax, m, &interfaces[i]) } else { Vec::new() };
+                                let below =
+                                    if i < nl { weigh(&scaled[i], s.lmax, m, &interfaces[i]) } else { Vec::new() };
+                                [above, below]
+                            })
+                            .collect()
                     })
-                    .collect();
-                coef[c].push(weighted);
-            }
-            quiet = if m > 0 && largest < 1e-6 { quiet + 1 } else { 0 };
-            if quiet == 2 {
-                break;
-            }
-        }
-        let z_km = std::iter::once(layers.layers.first().map_or(0.0, |l| l.top_km))
-            .chain(layers.layers.iter().map(|l| l.bottom_km))
+                    .collect()
+            })
             .collect();
         Columns {
             zenith_rad,
             coef,
             ground_irradiance,
             layers: scaled,
-            z_km,
+            z_km: interfaces_km(layers),
             radius_km: layers.shell_radius_km,
             lmax: s.lmax,
         }
@@ -237,6 +218,76 @@ impl Columns {
     }
 }
 
+/// The pseudo-spherical columns' diffuse fields, as the coefficients of
+/// their sources (`adding::source_coefficients`) per column, mode and
+/// interface.
+pub(super) struct Solution {
+    pub(super) s: Streams,
+    pub(super) scaled: Vec<Scaled>,
+    /// `a[c][m][i]`: column c, mode m, interface i (top down), l = 0..=lmax.
+    pub(super) a: Vec<Vec<Vec<Vec<f64>>>>,
+    /// The irradiance on a horizontal ground under each column, direct
+    /// (delta-M scaled) and diffuse.
+    pub(super) ground_irradiance: Vec<f64>,
+    /// The direct part of `ground_irradiance`.
+    pub(super) ground_direct: Vec<f64>,
+}
+
+impl Solution {
+    /// Every column, mode after mode, until two modes in a row change no
+    /// column's source by more than 1e-6 of its mode 0.
+    pub(super) fn new(layers: &Layers, streams: usize, zenith_rad: &[f64]) -> Solution {
+        let s = Streams::new(streams);
+        let scaled = delta_m(layers, 2 * streams);
+        let nl = scaled.len();
+        let paths: Vec<Paths> = zenith_rad.iter().map(|z| Paths::new(layers, &scaled, z.cos(), &[])).collect();
+        let mut a: Vec<Vec<Vec<Vec<f64>>>> = vec![Vec::new(); zenith_rad.len()];
+        let mut mode_zero_norm = vec![0.0; zenith_rad.len()];
+        let mut ground_irradiance = vec![0.0; zenith_rad.len()];
+        let mut ground_direct = vec![0.0; zenith_rad.len()];
+        let norm = |a: &[Vec<f64>]| a.iter().map(|x| x.iter().map(|v| v.abs()).sum::<f64>()).fold(0.0, f64::max);
+        let mut quiet = 0;
+        for m in 0..2 * streams {
+            let matrices = ModeMatrices::new(&s, &scaled, layers.ground_albedo, m);
+            let mut largest = 0.0f64;
+            for (c, zenith) in zenith_rad.iter().enumerate() {
+                let mu0 = zenith.cos();
+                let (down, up) = matrices.fields(&s, layers.ground_albedo, mu0, &paths[c]);
+                if m == 0 {
+                    let diffuse = 2.0 * PI * (0..s.n()).map(|j| s.w[j] * s.mu[j] * down[nl][j]).sum::<f64>();
+                    ground_direct[c] = mu0.max(0.0) * paths[c].beam[nl];
+                    ground_irradiance[c] = ground_direct[c] + diffuse;
+                }
+                let coefficients = source_coefficients(&s, m, &down, &up);
+                if m == 0 {
+                    mode_zero_norm[c] = norm(&coefficients);
+                } else {
+                    largest = largest.max(norm(&coefficients) / mode_zero_norm[c].max(1e-300));
+                }
+                a[c].push(coefficients);
+            }
+            quiet = if m > 0 && largest < 1e-6 { quiet + 1 } else { 0 };
+            if quiet == 2 {
+                break;
+            }
+        }
+        Solution { s, scaled, a, ground_irradiance, ground_direct }
+    }
+}
+
+/// (ω/2) (2l + 1) χ_l a_l of a layer for mode m (zero below l = m): the
+/// coefficients whose sum against Λ_l^m(u) is the layer's source J^m(u).
+pub(super) fn weigh(layer: &Scaled, lmax: usize, m: usize, a: &[f64]) -> Vec<f64> {
+    (0..=lmax).map(|j| if j < m { 0.0 } else { 0.5 * layer.omega * (2 * j + 1) as f64 * layer.chi[j] * a[j] }).collect()
+}
+
+/// The altitudes of the layers' interfaces, top down, km.
+pub(super) fn interfaces_km(layers: &Layers) -> Vec<f64> {
+    std::iter::once(layers.layers.first().map_or(0.0, |l| l.top_km))
+        .chain(layers.layers.iter().map(|l| l.bottom_km))
+        .collect()
+}
+
 /// Between `a` and `b`, a fraction `w` of the way: linear in the logarithm
 /// where both are positive, linear otherwise.
 fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
@@ -252,10 +303,16 @@ fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
 /// ground travels in arc before it leaves the atmosphere (none in a
 /// plane-parallel atmosphere), within 0 to π.
 pub fn grid(layers: &Layers, sun_zenith_rad: f64, step_rad: f64) -> Vec<f64> {
-    let reach = match (layers.shell_radius_km, layers.layers.first()) {
-        (Some(r), Some(top)) => (r / (r + top.top_km)).acos(),
-        _ => 0.0,
-    };
+    grid_reaches(layers, sun_zenith_rad, step_rad, 1.0)
+}
+
+/// `grid` to `reaches` times a ray's travel on both sides of the sun.
+pub fn grid_reaches(layers: &Layers, sun_zenith_rad: f64, step_rad: f64, reaches: f64) -> Vec<f64> {
+    let reach = reaches
+        * match (layers.shell_radius_km, layers.layers.first()) {
+            (Some(r), Some(top)) => (r / (r + top.top_km)).acos(),
+            _ => 0.0,
+        };
     let n = (reach / step_rad).ceil() as i64;
     let mut zenith: Vec<f64> =
         (-n..=n).map(|j| sun_zenith_rad + j as f64 * step_rad).filter(|&z| z > 0.0 && z < PI).collect();

@@ -99,7 +99,7 @@ pub fn normalised_associated(lmax: usize, m: usize, mu: f64) -> Vec<f64> {
 }
 
 /// P_l(μ) for l = 0 ..= lmax.
-fn legendre_all(lmax: usize, mu: f64) -> Vec<f64> {
+pub(super) fn legendre_all(lmax: usize, mu: f64) -> Vec<f64> {
     let mut p = vec![0.0; lmax + 1];
     p[0] = 1.0;
     if lmax >= 1 {

@@ -22,3 +22,4 @@ pub mod legendre;
 pub mod linalg;
 pub mod operator;
 pub mod render;
+pub mod spherical;

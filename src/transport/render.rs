@@ -46,13 +46,16 @@ pub struct Resolution {
     pub grading: Grading,
     /// The spacing of the sun-angle columns, degrees (`columns`).
     pub column_step_deg: f64,
+    /// Whether the columns' sources are made spherical (`spherical`): the
+    /// light carried sideways between them, which twilight needs.
+    pub spherical: bool,
 }
 
 impl Default for Resolution {
     /// 16 streams a hemisphere: within 0.05 % of DISORT on the clear and
     /// hazed slabs (tests/transport.rs); the cloud slabs need 32.
     fn default() -> Resolution {
-        Resolution { streams: 16, grading: Grading::default(), column_step_deg: 1.0 }
+        Resolution { streams: 16, grading: Grading::default(), column_step_deg: 1.0, spherical: false }
     }
 }
 
@@ -159,8 +162,14 @@ impl Wavelength {
         pixel_rays: Option<&[(usize, f64, f64)]>,
     ) -> Wavelength {
         let layers = Layers::new(&scene.medium, optics, 2 * resolution.streams, &resolution.grading);
-        let grid = columns::grid(&layers, sun_zenith_rad, resolution.column_step_deg.to_radians());
-        let columns = Columns::solve(&layers, resolution.streams, grid);
+        let step_rad = resolution.column_step_deg.to_radians();
+        let columns = if resolution.spherical {
+            // The node rays reach a ray's travel beyond the view's.
+            let grid = columns::grid_reaches(&layers, sun_zenith_rad, step_rad, 2.0);
+            super::spherical::solve(&layers, resolution.streams, grid, &super::spherical::Settings::default()).0
+        } else {
+            Columns::solve(&layers, resolution.streams, columns::grid(&layers, sun_zenith_rad, step_rad))
+        };
         let diffuse = match pixel_rays {
             Some(rays) => {
                 let mut pixels = vec![0.0; rays.iter().map(|r| r.0 + 1).max().unwrap_or(0)];
