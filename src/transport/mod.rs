@@ -22,4 +22,5 @@ pub mod legendre;
 pub mod linalg;
 pub mod operator;
 pub mod render;
+pub mod shell_rays;
 pub mod spherical;

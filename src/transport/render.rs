@@ -47,7 +47,8 @@ pub struct Resolution {
     /// The spacing of the sun-angle columns, degrees (`columns`).
     pub column_step_deg: f64,
     /// Whether the columns' sources are made spherical (`spherical`): the
-    /// light carried sideways between them, which twilight needs.
+    /// light carried sideways between them, which twilight needs (always
+    /// from `SPHERICAL_FROM_SUN_ZENITH_DEG` on).
     pub spherical: bool,
 }
 
@@ -63,9 +64,8 @@ impl Default for Resolution {
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Unsupported {
     #[error(
-        "the deterministic solver is not accurate at twilight yet: in spherical shells it renders suns up to 90 deg \
-         from the zenith, not {0} deg (at 93 deg it is 6 to 21 % too dark; docs/rendering.md); twilight renders \
-         with --method monte-carlo"
+        "the deterministic solver is judged at twilight down to a sun {MAX_SUN_ZENITH_DEG} deg from the zenith, \
+         not {0} deg (docs/rendering.md); deeper twilight renders with --method monte-carlo"
     )]
     Twilight(f64),
     #[error("the deterministic solver sees from the ground so far (--altitude-m 0), not from {0} m")]
@@ -75,11 +75,18 @@ pub enum Unsupported {
 }
 
 /// The lowest sun `sky render --method deterministic` accepts in spherical
-/// shells: beyond it the columns miss the light carried sideways into the
-/// Earth's shadow (the twilight judge in `tests/transport.rs`: −0.1 to
-/// −6.8 % at 91°, −6 to −21 % at 93°). `render` itself renders any sun, so
-/// that the judges can measure it.
-pub const MAX_SUN_ZENITH_DEG: f64 = 90.0;
+/// shells: the lowest its twilight judge reaches (`tests/transport.rs`,
+/// the path tracer's reference at 91, 93, 96 and 99°). `render` itself
+/// renders any sun.
+pub const MAX_SUN_ZENITH_DEG: f64 = 99.0;
+
+/// From this sun zenith angle on, in spherical shells, the columns'
+/// sources are made spherical (`spherical`) whatever
+/// `Resolution::spherical` says: lower, the columns alone miss the light
+/// carried sideways into the Earth's shadow (−0.1 to −6.8 % at 91°, −58 to
+/// −99.9 % at 99° before `spherical`), higher they are within about 1 %
+/// at ten times less cost.
+pub const SPHERICAL_FROM_SUN_ZENITH_DEG: f64 = 88.0;
 
 /// Why `sky render` refuses `view` of an atmosphere of this geometry with
 /// the deterministic method, if it does: what `render` cannot do, and
@@ -163,7 +170,8 @@ impl Wavelength {
     ) -> Wavelength {
         let layers = Layers::new(&scene.medium, optics, 2 * resolution.streams, &resolution.grading);
         let step_rad = resolution.column_step_deg.to_radians();
-        let columns = if resolution.spherical {
+        let twilight = sun_zenith_rad >= SPHERICAL_FROM_SUN_ZENITH_DEG.to_radians();
+        let columns = if layers.shell_radius_km.is_some() && (resolution.spherical || twilight) {
             // The node rays reach a ray's travel beyond the view's.
             let grid = columns::grid_reaches(&layers, sun_zenith_rad, step_rad, 2.0);
             super::spherical::solve(&layers, resolution.streams, grid, &super::spherical::Settings::default()).0
