@@ -11,7 +11,9 @@
 //! column (pseudo-spherical in shells), with the single scattering exact;
 //! `columns` solves such columns for a range of local sun angles and reads
 //! the multiply scattered light's source along each view where the sun
-//! stands as it does over the ground the view crosses. `render` turns that
+//! stands as it does over the ground the view crosses; `spherical` makes
+//! their sources spherical at twilight (source iteration along rays
+//! through the shells, `shell_rays`). `render` turns that
 //! into a view's pixels for `sky render --method deterministic`.
 //! `legendre` and `linalg` are their arithmetic.
 
