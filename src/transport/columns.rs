@@ -323,7 +323,7 @@ pub fn grid_reaches(layers: &Layers, sun_zenith_rad: f64, step_rad: f64, reaches
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::atmosphere::Atmosphere;
     use crate::mie::MieCache;
@@ -331,12 +331,18 @@ mod tests {
     use crate::transport::adding::Diffuse;
     use crate::transport::layers::Grading;
 
-    fn layers(file: &str, wavelength_nm: f64) -> Layers {
+    /// The default layers of the atmosphere `file` (relative to the
+    /// crate) at one wavelength, with `lmax` Legendre moments.
+    pub(in crate::transport) fn layers_with(file: &str, wavelength_nm: f64, lmax: usize) -> Layers {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
         let atm = Atmosphere::load(&path).unwrap();
         let medium = Medium::new(&atm);
         let optics = medium.spectral(&atm, wavelength_nm, 1.0, 0.3, &MieCache::shared_by_tests());
-        Layers::new(&medium, &optics, 32, &Grading::default())
+        Layers::new(&medium, &optics, lmax, &Grading::default())
+    }
+
+    fn layers(file: &str, wavelength_nm: f64) -> Layers {
+        layers_with(file, wavelength_nm, 32)
     }
 
     /// Where a ray meets no other sun than the observer's (a plane-parallel

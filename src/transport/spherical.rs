@@ -484,18 +484,11 @@ pub(super) fn iterate(layers: &Layers, solution: &mut Solution, zenith_rad: &[f6
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::atmosphere::Atmosphere;
-    use crate::mie::MieCache;
-    use crate::render::medium::Medium;
     use crate::transport::columns::grid;
-    use crate::transport::layers::Grading;
+    use crate::transport::columns::tests::layers_with;
 
     fn layers(file: &str, wavelength_nm: f64) -> Layers {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
-        let atm = Atmosphere::load(&path).unwrap();
-        let medium = Medium::new(&atm);
-        let optics = medium.spectral(&atm, wavelength_nm, 1.0, 0.3, &MieCache::shared_by_tests());
-        Layers::new(&medium, &optics, 16, &Grading::default())
+        layers_with(file, wavelength_nm, 16)
     }
 
     /// In a plane-parallel atmosphere the columns are the exact solution:
