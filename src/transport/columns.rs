@@ -116,8 +116,8 @@ impl Columns {
             let sin_u = (1.0 - u * u).max(0.0).sqrt();
             let lam: Vec<Vec<f64>> = (0..modes).map(|m| normalised_associated(self.lmax, m, u)).collect();
             // The columns this interface's points can fall between.
-            let (lo, _) = self.bracket((sun_zenith_rad - arc).max(0.0));
-            let (hi, w_hi) = self.bracket((sun_zenith_rad + arc).min(PI));
+            let (lo, _) = bracket(&self.zenith_rad, (sun_zenith_rad - arc).max(0.0));
+            let (hi, w_hi) = bracket(&self.zenith_rad, (sun_zenith_rad + arc).min(PI));
             let hi = if w_hi > 0.0 { hi + 1 } else { hi };
             // J^m of each column on each side: `jm[(c − lo) modes + m]`.
             jm.clear();
@@ -137,7 +137,7 @@ impl Columns {
                 } else {
                     1.0
                 };
-                let (c, w) = self.bracket(cos_s.acos());
+                let (c, w) = bracket(&self.zenith_rad, cos_s.acos());
                 let (c, w) = (c.clamp(lo, hi), if c < lo || c >= hi { 0.0 } else { w });
                 // Σ_m J^m cos(m φ), cos(m φ) by its recurrence.
                 let value = |c: usize| -> [f64; 2] {
@@ -183,23 +183,13 @@ impl Columns {
 
     /// The irradiance on the ground under a sun at `sun_zenith_rad`.
     pub fn ground_irradiance_at(&self, sun_zenith_rad: f64) -> f64 {
-        let (c, w) = self.bracket(sun_zenith_rad);
+        let (c, w) = bracket(&self.zenith_rad, sun_zenith_rad);
         let g = &self.ground_irradiance;
         if w == 0.0 {
             g[c]
         } else {
             g[c] * (1.0 - w) + g[c + 1] * w
         }
-    }
-
-    /// The column at or below `zenith` and the weight of the next one.
-    fn bracket(&self, zenith: f64) -> (usize, f64) {
-        let z = &self.zenith_rad;
-        let c = z.partition_point(|&x| x <= zenith).saturating_sub(1);
-        if c + 1 >= z.len() || zenith <= z[c] {
-            return (c, 0.0);
-        }
-        (c, ((zenith - z[c]) / (z[c + 1] - z[c])).clamp(0.0, 1.0))
     }
 
     /// A ray leaving the ground at zenith cosine `mu`: its zenith cosine at
@@ -288,9 +278,19 @@ pub(super) fn interfaces_km(layers: &Layers) -> Vec<f64> {
         .collect()
 }
 
+/// The column of `zenith_rad` (ascending) at or below `zenith` and the
+/// weight of the next one, linear in the angle.
+pub(super) fn bracket(zenith_rad: &[f64], zenith: f64) -> (usize, f64) {
+    let c = zenith_rad.partition_point(|&x| x <= zenith).saturating_sub(1);
+    if c + 1 >= zenith_rad.len() || zenith <= zenith_rad[c] {
+        return (c, 0.0);
+    }
+    (c, ((zenith - zenith_rad[c]) / (zenith_rad[c + 1] - zenith_rad[c])).clamp(0.0, 1.0))
+}
+
 /// Between `a` and `b`, a fraction `w` of the way: linear in the logarithm
 /// where both are positive, linear otherwise.
-fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
+pub(super) fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
     if a > 0.0 && b > 0.0 {
         (a.ln() * (1.0 - w) + b.ln() * w).exp()
     } else {

@@ -39,7 +39,7 @@
 //! Modes of azimuth above `Settings::modes` keep the columns' values.
 
 use super::adding::{source_coefficients, through_layer, Scaled};
-use super::columns::{interfaces_km, Columns, Solution};
+use super::columns::{bracket, interfaces_km, log_lerp, Columns, Solution};
 use super::layers::Layers;
 use super::legendre::{legendre_all, normalised_associated};
 use super::shell_rays::{stops, through_layer_log, trace, At, Beam, Ray};
@@ -96,23 +96,6 @@ pub fn solve(layers: &Layers, streams: usize, zenith_rad: Vec<f64>, settings: &S
     let mut solution = Solution::new(layers, streams, &zenith_rad);
     let report = iterate(layers, &mut solution, &zenith_rad, settings);
     (Columns::from_solution(layers, solution, zenith_rad), report)
-}
-
-/// The column at or below `zenith` and the weight of the next one.
-fn bracket(zenith_rad: &[f64], zenith: f64) -> (usize, f64) {
-    let c = zenith_rad.partition_point(|&x| x <= zenith).saturating_sub(1);
-    if c + 1 >= zenith_rad.len() || zenith <= zenith_rad[c] {
-        return (c, 0.0);
-    }
-    (c, ((zenith - zenith_rad[c]) / (zenith_rad[c + 1] - zenith_rad[c])).clamp(0.0, 1.0))
-}
-
-fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
-    if a > 0.0 && b > 0.0 {
-        (a.ln() * (1.0 - w) + b.ln() * w).exp()
-    } else {
-        a * (1.0 - w) + b * w
-    }
 }
 
 /// The interfaces nearest to `targets_km`, top down, with the top and the
