@@ -76,6 +76,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed={proto}");
     println!("cargo:rustc-env=SKY_RENDER_SOURCE={}", source_hash(&RENDER_SOURCES));
     println!("cargo:rustc-env=SKY_MS_GRID_SOURCE={}", source_hash(&["src/bake/ms_grid.rs"]));
+    println!("cargo:rustc-env=SKY_TRANSPORT_SOURCE={}", source_hash(&["src/transport"]));
     println!(
         "cargo:rustc-env=SKY_FOG_RESAMPLE_SOURCE={}",
         source_hash(&["src/bake/fog_resample.rs", "src/lut/fog.rs"])

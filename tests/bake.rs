@@ -183,6 +183,49 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
 /// table computed here from the same optics; in front of nearer objects
 /// the fog is fainter and the object less attenuated; `sky lut sample
 /// --depth-m` prints it.
+/// `--method deterministic` (tests/bakes/solver.toml: clear.toml in
+/// shells, so the slices from 88° on take the spherical source, at 2 x 8
+/// texels and 4 streams): every slice solved, the manifest and the
+/// summary say how, a re-run renders nothing and writes the same bytes,
+/// and the path tracer's slices are cached apart from the solver's.
+#[test]
+fn a_deterministic_bake_packs_and_is_cached_apart_from_the_path_tracers() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("luts");
+    let bake = root().join("tests/bakes/solver.toml");
+    let args = |method: &'static str| {
+        ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json", "--method", method]
+            .map(String::from)
+    };
+    let run = |method: &'static str| {
+        let a = args(method);
+        summary(&sky(&a.iter().map(String::as_str).collect::<Vec<_>>(), tmp.path()))
+    };
+    let first = run("deterministic");
+    assert_eq!(first["method"], "deterministic");
+    assert_eq!(rendered(&first), [("clear".to_string(), 63, 1)]);
+    let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
+    assert_eq!(luts.manifest.method.as_deref(), Some("deterministic"));
+    assert_eq!(luts.manifest.skies[0].texels_clamped, 0);
+    // Day and twilight (the spherical source) both light the sky.
+    for elevation_deg in [40.0, 1.0, -2.0, -6.0] {
+        let d = sky::directions::camera::direction_deg(60.0, 120.0);
+        let y = luts.sample_xyz(elevation_deg, 0.0, 0.0, 0.0, d)[1];
+        assert!(y > 0.0 && y.is_finite(), "sun elevation {elevation_deg}: {y}");
+    }
+    let files = ["clear.ktx2", "transmittance.ktx2", "manifest.json"];
+    let read = || files.map(|f| std::fs::read(out.join(f)).unwrap());
+    let before = read();
+    let again = run("deterministic");
+    assert_eq!(rendered(&again), [("clear".to_string(), 0, 64)]);
+    assert!(before == read(), "a re-run from the cache changed the files");
+    // The path tracer's slices are other slices: rendered, not found.
+    let traced = run("monte-carlo");
+    assert_eq!(rendered(&traced), [("clear".to_string(), 63, 1)]);
+    let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
+    assert_eq!(luts.manifest.method.as_deref(), Some("monte-carlo"));
+}
+
 #[test]
 fn a_bake_carries_the_fog_luts() {
     use sky::lut::fog::{attenuation_texel, fog_texel_view, ATTENUATION_SIZE};
@@ -678,6 +721,7 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
         max_rel_error: None,
         ms_grid: None,
         fog_ms_size: None,
+        streams: None,
     });
     let scene = Scene::new(&atm, &spectral, &sky::mie::MieCache::shared_by_tests(), &|| {});
     let table = sky::bake::tables::transmittance_table(&scene);

@@ -14,6 +14,7 @@
 //! ms_grid = "16x13"          # optional: multiple scattering on a grid of its own
 //!                            # (rows x azimuths), interpolated (bake::ms_grid)
 //! fog_ms_size = "16x16"      # optional: the Shadowed Fog rendered at this size
+//! streams = 16               # optional: the transport solver's streams a hemisphere
 //!                            # (width x height) and resampled to the Fog LUT's
 //!
 //! [[sky]]                    # in the talk's order: clear, hazed, cloudy0 ... cloudy5
@@ -79,6 +80,10 @@ pub struct Sampling {
     /// ([`super::fog_resample::resample_shadowed`]); None: at the LUT's size.
     #[serde(default)]
     pub fog_ms_size: Option<[usize; 2]>,
+    /// The transport solver's discrete-ordinate streams a hemisphere
+    /// (`--method deterministic`); None: its default, 16.
+    #[serde(default)]
+    pub streams: Option<usize>,
 }
 
 /// One basis sky of a bake.
@@ -178,6 +183,7 @@ struct RawSampling {
     max_rel_error: Option<S<f64>>,
     ms_grid: Option<S<String>>,
     fog_ms_size: Option<S<String>>,
+    streams: Option<S<i64>>,
 }
 
 #[derive(Deserialize)]
@@ -199,10 +205,17 @@ struct RawSky {
 /// rounding error (about 1 %).
 pub fn default_sampling(q: Quality) -> Sampling {
     match q {
-        Quality::Draft => Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None },
-        Quality::Final => {
-            Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.01), ms_grid: None, fog_ms_size: None }
+        Quality::Draft => {
+            Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None, streams: None }
         }
+        Quality::Final => Sampling {
+            band_nm: 5.0,
+            spp: 16384,
+            max_rel_error: Some(0.01),
+            ms_grid: None,
+            fog_ms_size: None,
+            streams: None,
+        },
     }
 }
 
@@ -267,6 +280,12 @@ impl Ctx<'_> {
                         g.get_ref()
                     ),
                 ),
+            }
+        }
+        if let Some(n) = &raw.streams {
+            match usize::try_from(*n.get_ref()) {
+                Ok(v) if (2..=128).contains(&v) => s.streams = Some(v),
+                _ => self.err(n, format!("{what}.streams: must be a whole number from 2 to 128, got {}", n.get_ref())),
             }
         }
         if let Some(g) = &raw.fog_ms_size {
@@ -461,10 +480,20 @@ mod tests {
         assert_eq!(b.skies.len(), 1);
         let s = &b.skies[0];
         assert_eq!((s.width, s.height, s.slices, s.line), (32, 128, 64, 3));
-        assert_eq!(s.draft, Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None });
+        assert_eq!(
+            s.draft,
+            Sampling { band_nm: 20.0, spp: 4, max_rel_error: None, ms_grid: None, fog_ms_size: None, streams: None }
+        );
         assert_eq!(
             s.final_,
-            Sampling { band_nm: 5.0, spp: 16384, max_rel_error: Some(0.02), ms_grid: None, fog_ms_size: None }
+            Sampling {
+                band_nm: 5.0,
+                spp: 16384,
+                max_rel_error: Some(0.02),
+                ms_grid: None,
+                fog_ms_size: None,
+                streams: None
+            }
         );
         assert_eq!(b.fog, FogSettings { ceiling_km: 3.0, width: 32, height: 32 });
         let b = parse("[[sky]]\nname = \"clear\"\natmosphere = \"clear.toml\"\nwidth = 32\nheight = 128\n[fog]\nceiling_km = 2.5\nwidth = 8\nheight = 4\n").unwrap();

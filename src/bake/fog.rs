@@ -358,6 +358,7 @@ mod tests {
             max_rel_error: None,
             ms_grid: None,
             fog_ms_size: None,
+            streams: None,
         });
         let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let cancel = AtomicBool::new(false);

@@ -32,7 +32,7 @@ pub(super) struct Forecasts {
 
 impl Forecasts {
     /// All zero: no slice of `plan` forecast yet.
-    fn zero(plan: &[Planned]) -> Forecasts {
+    pub(super) fn zero(plan: &[Planned]) -> Forecasts {
         let zero: Vec<Vec<f64>> = plan.iter().map(|p| vec![0.0; p.views.len()]).collect();
         Forecasts { sky: zero.clone(), fog: zero.clone(), sky_after: zero.clone(), fog_after: zero }
     }
@@ -495,8 +495,14 @@ mod tests {
     /// exactly the samples each texel of the adaptive render then takes.
     #[test]
     fn pilots_plan_every_texels_samples_exactly() {
-        let sampling =
-            Sampling { band_nm: 40.0, spp: 400, max_rel_error: Some(0.05), ms_grid: None, fog_ms_size: None };
+        let sampling = Sampling {
+            band_nm: 40.0,
+            spp: 400,
+            max_rel_error: Some(0.05),
+            ms_grid: None,
+            fog_ms_size: None,
+            streams: None,
+        };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let mut total = 0u64;

@@ -21,12 +21,13 @@ mod plan;
 mod queue;
 pub mod run;
 pub mod slices;
+pub mod solver;
 pub mod tables;
 mod tracker;
 
 pub use cache::{RenderedSlice, SliceCache};
 pub use file::{BakeFile, BakeFileError, BasisSky, Quality, Sampling};
-pub use run::{render_slices, BakeOptions, SkySlices, SliceId};
+pub use run::{render_slices, BakeOptions, Method, SkySlices, SliceId};
 
 use crate::session::farm::FarmEvent;
 use std::sync::Arc;
@@ -165,6 +166,8 @@ pub enum BakeError {
     NotInCache { cache: std::path::PathBuf, missing: Vec<String> },
     #[error("fog slice {sky}:fog:{index} was neither rendered in this bake nor found in the cache {}: did something clear the cache during the bake? Run the bake again", cache.display())]
     FogSliceLost { sky: String, index: usize, cache: std::path::PathBuf },
+    #[error("basis sky {sky}: {error} (--method monte-carlo bakes it with the path tracer)")]
+    Solver { sky: String, error: crate::transport::render::Unsupported },
     #[error("bake cancelled")]
     Cancelled,
 }

@@ -50,6 +50,7 @@ pub struct PlanDefaults {
     pub out_dir: PathBuf,
     pub cache_dir: Option<PathBuf>,
     pub quality: Quality,
+    pub method: super::Method,
     pub colour_space: ColourSpace,
 }
 
@@ -93,6 +94,8 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
         "{{Param.CacheDir}}",
         "--quality",
         "{{Param.Quality}}",
+        "--method",
+        "{{Param.Method}}",
     ];
     let args = |extra: &[&str]| list(["bake-luts"].iter().chain(common.iter()).chain(extra.iter()).map(|a| q(a)));
     let mut t = String::new();
@@ -158,6 +161,12 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
     );
     let _ = writeln!(
         w,
+        "- name: \"Method\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
+        list([q("deterministic"), q("monte-carlo")]),
+        q(d.method.name())
+    );
+    let _ = writeln!(
+        w,
         "- name: \"ColourSpace\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
         list(ColourSpace::ALL.iter().map(|c| q(c.name()))),
         q(d.colour_space.name())
@@ -207,6 +216,7 @@ mod tests {
             out_dir: ".".into(),
             cache_dir: Some("cache".into()),
             quality: Quality::Final,
+            method: crate::bake::Method::Deterministic,
             colour_space: ColourSpace::AcesCg,
         };
         let t = job_template(&bake, "sky bake-luts bake", &d);

@@ -287,6 +287,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         direction_mapping: manifest::direction_mapping(),
         weather: manifest::weather(),
         skies,
+        method: None,
         transmittance: None,
         fog: None,
         ambient_file: None,
@@ -297,7 +298,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
 /// (each file through a temporary file and a rename).
 pub fn write_bake(
     skies: &[SkySlices],
-    quality: &str,
+    (quality, method): (&str, super::Method),
     colour: ColourSpace,
     dir: &Path,
 ) -> Result<(Manifest, Vec<PackStats>), BakeError> {
@@ -318,6 +319,7 @@ pub fn write_bake(
     let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
     let ambient_file = super::pack_ambient::write_ambient(&entries, colour, dir)?;
     let mut m = manifest(quality, colour, entries);
+    m.method = Some(method.name().into());
     m.transmittance = transmittance;
     m.ambient_file = ambient_file;
     m.fog = match fog {

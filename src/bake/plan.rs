@@ -9,7 +9,7 @@ use super::cache::SliceCache;
 use super::file::{BakeFile, BasisSky};
 use super::fog::FogTodo;
 use super::ms_grid::MsGrid;
-use super::slices::{sky_slice_key, slice_view, spectral_settings, BakeOptions, SkySlices};
+use super::slices::{sky_slice_key, slice_view, spectral_settings, BakeOptions, Method, SkySlices};
 use super::BakeError;
 use crate::atmosphere::Atmosphere;
 use crate::render::segments::Standpoint;
@@ -125,7 +125,7 @@ fn plan_sky(sky: &BasisSky, opts: &BakeOptions) -> Result<Planned, BakeError> {
             continue;
         }
         let view = slice_view(sky, &sampling, index, radius_km, top_km, threshold_deg);
-        let key = sky_slice_key(&atm.content_hash, &spectral, &view, opts.quality, &sampling);
+        let key = sky_slice_key(&atm.content_hash, &spectral, &view, (opts.quality, opts.method), &sampling);
         let hit = opts.cache.get(&key);
         cached += hit.is_some() as usize;
         same_as.push(if hit.is_some() {
@@ -136,8 +136,10 @@ fn plan_sky(sky: &BasisSky, opts: &BakeOptions) -> Result<Planned, BakeError> {
         views.push(if hit.is_some() { None } else { Some((view, key)) });
         slices.push(hit);
     }
+    // The transport solver renders whole slices (no grid of multiple scattering).
     let grid = sampling
         .ms_grid
+        .filter(|_| opts.method == Method::MonteCarlo)
         .map(|g| MsGrid::new(g, Standpoint::new(atm.planet.geometry, radius_km, sky.altitude_m / 1000.0)));
     let out = SkySlices {
         sky: sky.clone(),

@@ -9,7 +9,7 @@
 use super::cache::SliceCache;
 use super::forecast::Forecasts;
 use super::plan::{Plan, Planned};
-use super::slices::{strip_view, BakeOptions};
+use super::slices::{strip_view, BakeOptions, Method};
 use super::tracker::{QueueJob, Tracker};
 use super::{BakeError, BakeEvent};
 use crate::mie::MieCache;
@@ -84,7 +84,7 @@ pub(super) fn render_queue(
         grids: (0..n).map(|_| BTreeMap::new()).collect(),
         fog: (0..n).map(|_| Mutex::default()).collect(),
     };
-    let (queued, parts) = queue_jobs(plan, sessions, forecasts, &opts.cache)?;
+    let (queued, parts) = queue_jobs(plan, sessions, forecasts, (&opts.cache, opts.method))?;
     if parts.is_empty() {
         return Ok(rendered);
     }
@@ -139,19 +139,20 @@ pub(super) fn render_queue(
 }
 
 /// The queue's jobs and their farm parts, in order: each basis sky's strip
-/// (or its slices' grids, a job each), then its fog slices, a job each.
+/// (or its slices' grids, a job each; none by the transport solver, which
+/// renders them on this process), then its fog slices, a job each.
 fn queue_jobs(
     plan: &Plan,
     sessions: &[Option<Session>],
     forecasts: &Forecasts,
-    cache: &SliceCache,
+    (cache, method): (&SliceCache, Method),
 ) -> Result<(Vec<QueuedJob>, Vec<FarmPart>), BakeError> {
     let mut queued: Vec<QueuedJob> = Vec::new();
     let mut parts = Vec::new();
     for (k, p) in plan.skies.iter().enumerate() {
         let Some(session) = &sessions[k] else { continue };
         let sky = p.out.sky.name.clone();
-        let to_render = p.to_render();
+        let to_render = if method == Method::MonteCarlo { p.to_render() } else { Vec::new() };
         if p.grid.is_some() {
             for &i in &to_render {
                 let view = p.jobs[i].clone().expect("to render");

@@ -22,9 +22,10 @@
 //! [`slices`](super::slices).
 
 use super::finish::Finisher;
-use super::forecast::forecast;
+use super::forecast::{forecast, Forecasts};
 use super::plan::{plan, Plan};
 use super::queue::{prepare_sessions, render_queue};
+use super::solver::render_strips;
 use super::tracker::{farm_options, Tracker};
 use super::BakeError;
 use super::BakeEvent;
@@ -37,7 +38,7 @@ use std::sync::{Arc, Mutex};
 pub(super) use super::plan::Planned;
 pub(crate) use super::slices::slice_of_image;
 pub use super::slices::{
-    sky_slice_key, slice_view, spectral_settings, strip_view, BakeOptions, SkySlices, SliceId, BAKE_SEED,
+    sky_slice_key, slice_view, spectral_settings, strip_view, BakeOptions, Method, SkySlices, SliceId, BAKE_SEED,
 };
 
 /// Renders (or finds in the cache) every slice the options ask for, basis
@@ -58,8 +59,23 @@ pub fn render_slices(
     // the quality samples adaptively, every slice's pilot: the forecast
     // behind the ETA, before the first slice is rendered.
     let sessions = prepare_sessions(&plan, &optics, mie, &farm, &tracker);
-    let forecasts = forecast(&plan.skies, &plan.fog, &sessions, bake, (&opts.cache, &tracker), &cancel)?;
-    let mut rendered = render_queue(&plan, &sessions, &forecasts, &farm, opts, &tracker, &cancel)?;
+    let (forecasts, mut rendered) = match opts.method {
+        Method::MonteCarlo => {
+            let forecasts = forecast(&plan.skies, &plan.fog, &sessions, bake, (&opts.cache, &tracker), &cancel)?;
+            let rendered = render_queue(&plan, &sessions, &forecasts, &farm, opts, &tracker, &cancel)?;
+            (forecasts, rendered)
+        }
+        // The sky's slices by the solver here, then the fog's by the path
+        // tracer (the queue takes no sky slice by this method); the ETA
+        // from the pace of the texels.
+        Method::Deterministic => {
+            let strips = render_strips(&plan, &sessions, opts.quality, &tracker, &cancel)?;
+            let forecasts = Forecasts::zero(&plan.skies);
+            let mut rendered = render_queue(&plan, &sessions, &forecasts, &farm, opts, &tracker, &cancel)?;
+            rendered.strips = strips;
+            (forecasts, rendered)
+        }
+    };
     drop(sessions);
     let finisher =
         Finisher { bake, opts, mie, optics: &optics, tracker: &tracker, forecasts: &forecasts, cancel: &cancel };
@@ -142,8 +158,14 @@ pub(super) mod tests {
     /// them with the sun 6° below it); every texel's nodes among them.
     #[test]
     fn a_slice_renders_only_the_grid_nodes_its_texels_take() {
-        let sampling =
-            Sampling { band_nm: 40.0, spp: 16, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
+        let sampling = Sampling {
+            band_nm: 40.0,
+            spp: 16,
+            max_rel_error: None,
+            ms_grid: Some([16, 13]),
+            fog_ms_size: None,
+            streams: None,
+        };
         let (atm, _, sky) = test_sky(32, 128, &sampling);
         let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
         let patch = super::super::ms_grid::SUN_PATCH_ROWS * super::super::ms_grid::SUN_PATCH_COLS;
@@ -207,8 +229,14 @@ pub(super) mod tests {
     /// more than the sum of the squared weights node by node.
     #[test]
     fn nodes_of_one_direction_share_their_noise() {
-        let sampling =
-            Sampling { band_nm: 40.0, spp: 16, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
+        let sampling = Sampling {
+            band_nm: 40.0,
+            spp: 16,
+            max_rel_error: None,
+            ms_grid: Some([16, 13]),
+            fog_ms_size: None,
+            streams: None,
+        };
         let (atm, scene, sky) = test_sky(8, 32, &sampling);
         let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
         let view = slice_view(&sky, &sampling, 4, atm.planet.radius_km, atm.planet.top_km, sky.threshold_deg);
@@ -266,8 +294,14 @@ pub(super) mod tests {
     /// scattering, or mirroring the grid the wrong way, misses by far more.
     #[test]
     fn a_slice_from_its_grid_agrees_with_the_slice_rendered_whole() {
-        let sampling =
-            Sampling { band_nm: 40.0, spp: 512, max_rel_error: None, ms_grid: Some([16, 13]), fog_ms_size: None };
+        let sampling = Sampling {
+            band_nm: 40.0,
+            spp: 512,
+            max_rel_error: None,
+            ms_grid: Some([16, 13]),
+            fog_ms_size: None,
+            streams: None,
+        };
         let (atm, scene, sky) = test_sky(4, 16, &sampling);
         let cancel = AtomicBool::new(false);
         let grid = MsGrid::new([16, 13], Standpoint::new(atm.planet.geometry, atm.planet.radius_km, 0.0));
@@ -322,7 +356,14 @@ pub(super) mod tests {
     /// slice into the next, and with an adaptive sample count.
     #[test]
     fn a_strip_renders_each_slice_as_it_renders_alone() {
-        let sampling = Sampling { band_nm: 40.0, spp: 128, max_rel_error: Some(0.3), ms_grid: None, fog_ms_size: None };
+        let sampling = Sampling {
+            band_nm: 40.0,
+            spp: 128,
+            max_rel_error: Some(0.3),
+            ms_grid: None,
+            fog_ms_size: None,
+            streams: None,
+        };
         let (atm, scene, sky) = test_sky(3, 8, &sampling);
         let cancel = AtomicBool::new(false);
         // Day, the sun-centred mapping's last slices, twilight.

@@ -56,10 +56,36 @@ impl std::fmt::Display for SliceId {
     }
 }
 
+/// How a bake computes the light of its sky slices.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Method {
+    /// The transport solver (`transport`): no noise; the slices of a basis
+    /// sky share one solution per wavelength, on this process's cores.
+    Deterministic,
+    /// The path tracer (the talk's way, and the referee), on the embedded
+    /// worker or the farm. The default until the solver's draft bake costs
+    /// less than the path tracer's.
+    #[default]
+    MonteCarlo,
+}
+
+impl Method {
+    /// The name in the bake's flags and manifest.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Deterministic => "deterministic",
+            Method::MonteCarlo => "monte-carlo",
+        }
+    }
+}
+
 /// How to run a bake.
 #[derive(Debug, Clone)]
 pub struct BakeOptions {
     pub quality: Quality,
+    /// How the sky slices are computed (the fog's by the path tracer
+    /// either way, so far).
+    pub method: Method,
     pub cache: SliceCache,
     /// The workers (the embedded one: `WorkerSpec::Local`).
     pub workers: Vec<WorkerSpec>,
@@ -138,18 +164,30 @@ pub fn slice_view(sky: &BasisSky, s: &Sampling, index: usize, radius_km: f64, to
 }
 
 /// The cache key of a basis sky's slice: its view's, and with multiple
-/// scattering on a grid of its own (`ms_grid`), the grid's too.
+/// scattering on a grid of its own (`ms_grid`), the grid's too; by the
+/// transport solver, its resolution and source instead (it takes no grid).
 pub fn sky_slice_key(
     atmosphere_hash: &str,
     spectral: &SpectralSettings,
     view: &View,
-    quality: Quality,
+    (quality, method): (Quality, Method),
     sampling: &Sampling,
 ) -> String {
-    match sampling.ms_grid {
-        None => slice_key(atmosphere_hash, spectral, view, quality.name()),
+    match (method, sampling.ms_grid) {
+        (Method::Deterministic, _) => slice_key(
+            atmosphere_hash,
+            spectral,
+            view,
+            &format!(
+                "{} deterministic {:?} {}",
+                quality.name(),
+                super::solver::resolution(quality, sampling),
+                env!("SKY_TRANSPORT_SOURCE")
+            ),
+        ),
+        (Method::MonteCarlo, None) => slice_key(atmosphere_hash, spectral, view, quality.name()),
         // The grid's layout and resampling named by their source.
-        Some([rows, cols]) => slice_key(
+        (Method::MonteCarlo, Some([rows, cols])) => slice_key(
             atmosphere_hash,
             spectral,
             view,

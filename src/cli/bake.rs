@@ -30,6 +30,9 @@ pub struct BakeArgs {
     /// Quality preset of the bake file
     #[arg(long, value_enum, default_value = "draft")]
     quality: QualityArg,
+    /// How the sky slices' light is computed: monte-carlo (the path tracer, the talk's way: noise that the samples bring down; on the embedded worker or the farm) or deterministic (the transport solver: no noise; the slices of a basis sky share one solution, on this machine's cores; so far slower than a draft by the path tracer, see docs/bakes.md). The fog LUTs come from the path tracer either way so far
+    #[arg(long, value_enum, default_value = "monte-carlo")]
+    method: MethodArg,
     /// Linear RGB space of the textures: rec709, rec2020, acescg or xyz (the manifest records its matrix)
     #[arg(long, default_value = "rec709", value_parser = parse_colour_space)]
     colour_space: ColourSpace,
@@ -65,6 +68,21 @@ pub struct BakeArgs {
 enum PlanFormat {
     /// An Open Job Description job template (AWS Deadline Cloud; `openjd` runs it locally)
     Openjd,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+enum MethodArg {
+    Deterministic,
+    MonteCarlo,
+}
+
+impl MethodArg {
+    fn method(self) -> bake::Method {
+        match self {
+            MethodArg::Deterministic => bake::Method::Deterministic,
+            MethodArg::MonteCarlo => bake::Method::MonteCarlo,
+        }
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -255,6 +273,7 @@ pub fn run(a: BakeArgs) -> Result<ExitCode> {
     let bar = Arc::new(Mutex::new(None));
     let opts = BakeOptions {
         quality,
+        method: a.method.method(),
         cache,
         workers,
         farm,
@@ -341,10 +360,11 @@ fn report_rendered(skies: &[bake::SkySlices], started: Instant) -> usize {
 /// Packs the rendered skies into the LUT files and manifest.json in --out,
 /// and reports them (on stderr; with --json, the summary on stdout).
 fn pack(a: &BakeArgs, skies: &[bake::SkySlices], quality: Quality) -> Result<ExitCode> {
-    let (manifest, stats) = match bake::pack::write_bake(skies, quality.name(), a.colour_space, &a.out) {
-        Ok(m) => m,
-        Err(e) => return failed(a.json, quality, &e),
-    };
+    let (manifest, stats) =
+        match bake::pack::write_bake(skies, (quality.name(), a.method.method()), a.colour_space, &a.out) {
+            Ok(m) => m,
+            Err(e) => return failed(a.json, quality, &e),
+        };
     let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
     for (e, st) in manifest.skies.iter().zip(&stats) {
         eprintln!(
@@ -410,7 +430,7 @@ fn pack(a: &BakeArgs, skies: &[bake::SkySlices], quality: Quality) -> Result<Exi
             .collect();
         outln!(
             "{}",
-            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "fog": fog_json, "errors": [] })
+            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "method": a.method.method().name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "fog": fog_json, "errors": [] })
         );
     }
     Ok(ExitCode::SUCCESS)
@@ -452,6 +472,7 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
         out_dir: ".".into(),
         cache_dir: within(&cache),
         quality,
+        method: a.method.method(),
         colour_space: a.colour_space,
     };
     let stem = bake_path.file_stem().map_or("bake".into(), |s| s.to_string_lossy().into_owned());

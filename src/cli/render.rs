@@ -290,7 +290,7 @@ fn run_deterministic(
     let session = prepare_session(threads, atm, bundle, settings, local, style, start)?;
     let prep_s = start.elapsed().as_secs_f64();
     let resolution = sky::transport::render::Resolution { streams: a.streams as usize, ..Default::default() };
-    let steps = session.scene.band_optics.len() + session.scene.line_optics.len();
+    let steps = sky::transport::render::wavelengths_solved(&session.scene, &resolution);
     let bar = ProgressBar::new(steps as u64);
     bar.set_style(
         ProgressStyle::with_template("solving [{bar:30}] {pos}/{len} wavelengths, eta {eta}")

@@ -20,6 +20,11 @@ pub struct Manifest {
     pub generator: String,
     /// "draft" or "final".
     pub quality: String,
+    /// How the sky slices' light was computed: "deterministic" (the
+    /// transport solver) or "monte-carlo" (the path tracer). Added within
+    /// version 2; absent from bakes made before it, all "monte-carlo".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub method: Option<String>,
     /// What a decoded texel means.
     pub units: Units,
     pub colour: Colour,
@@ -327,6 +332,7 @@ pub(crate) mod tests {
             version: VERSION,
             generator: format!("sky {}", crate::VERSION),
             quality: "draft".into(),
+            method: None,
             units: Units { luminance: "cd/m^2".into(), scale: String::new() },
             colour: Colour { space: "xyz".into(), rgb_from_xyz: i, xyz_from_rgb: i, note: String::new() },
             time_mapping: time_mapping(),

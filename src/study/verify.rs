@@ -312,6 +312,15 @@ fn ambient_error(
     (want > 0.0).then(|| (decoded - want).abs() / want)
 }
 
+/// How the bake of `manifest` computed its sky slices (a manifest that
+/// does not say is older than the transport solver: the path tracer).
+fn method_of(manifest: &crate::lut::manifest::Manifest) -> crate::bake::Method {
+    match manifest.method.as_deref() {
+        Some("deterministic") => crate::bake::Method::Deterministic,
+        _ => crate::bake::Method::MonteCarlo,
+    }
+}
+
 /// The rounding error of the stored texels against the rendered ones, from
 /// the cached slices (None if the cache lacks them).
 fn quantisation(
@@ -350,7 +359,7 @@ fn quantisation(
             &session.atmosphere.content_hash,
             &session.spectral,
             &view,
-            quality,
+            (quality, method_of(&luts.manifest)),
             sampling,
         );
         let slice = cache.get(&key)?;

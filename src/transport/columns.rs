@@ -102,62 +102,83 @@ impl Columns {
     /// azimuth of `phis` from the sun's, the sun at zenith angle
     /// `sun_zenith_rad` over the observer (within the columns' span).
     pub fn rays(&self, sun_zenith_rad: f64, mu: f64, phis: &[f64]) -> Vec<f64> {
+        self.rays_for_suns(&[(sun_zenith_rad, phis)], mu).pop().expect("one sun")
+    }
+
+    /// `rays` for several suns at once (the slices of a bake), each with
+    /// its azimuths: the sources of each column along the ray (the costly
+    /// part, which does not depend on the sun) are evaluated once for all
+    /// of them. Each sun's radiances are those `rays` gives it alone, bit
+    /// for bit.
+    pub fn rays_for_suns(&self, suns: &[(f64, &[f64])], mu: f64) -> Vec<Vec<f64>> {
         let nl = self.layers.len();
         let modes = self.coef.first().map_or(0, |c| c.len());
-        let (sin_v, sin0, cos0) = ((1.0 - mu * mu).max(0.0).sqrt(), sun_zenith_rad.sin(), sun_zenith_rad.cos());
-        let cos_phis: Vec<f64> = phis.iter().map(|p| p.cos()).collect();
-        // The source on each side of each interface, per azimuth: as the
-        // base of the layer above (`.0`) and as the top of the layer below
-        // (`.1`).
-        let mut at = vec![vec![(0.0, 0.0); nl + 1]; phis.len()];
+        let sin_v = (1.0 - mu * mu).max(0.0).sqrt();
+        // The source on each side of each interface, per sun and azimuth:
+        // as the base of the layer above (`.0`) and as the top of the
+        // layer below (`.1`).
+        let mut at: Vec<Vec<Vec<(f64, f64)>>> =
+            suns.iter().map(|(_, phis)| vec![vec![(0.0, 0.0); nl + 1]; phis.len()]).collect();
         let mut jm: Vec<[f64; 2]> = Vec::new();
         for i in 0..=nl {
             let (u, arc) = self.ray_at(mu, self.z_km[i]);
             let sin_u = (1.0 - u * u).max(0.0).sqrt();
             let lam: Vec<Vec<f64>> = (0..modes).map(|m| normalised_associated(self.lmax, m, u)).collect();
-            // The columns this interface's points can fall between.
-            let (lo, _) = bracket(&self.zenith_rad, (sun_zenith_rad - arc).max(0.0));
-            let (hi, w_hi) = bracket(&self.zenith_rad, (sun_zenith_rad + arc).min(PI));
-            let hi = if w_hi > 0.0 { hi + 1 } else { hi };
-            // J^m of each column on each side: `jm[(c − lo) modes + m]`.
+            // The columns each sun's points at this interface can fall
+            // between, and those of all the suns.
+            let spans: Vec<(usize, usize)> = suns
+                .iter()
+                .map(|&(sun, _)| {
+                    let (lo, _) = bracket(&self.zenith_rad, (sun - arc).max(0.0));
+                    let (hi, w_hi) = bracket(&self.zenith_rad, (sun + arc).min(PI));
+                    (lo, if w_hi > 0.0 { hi + 1 } else { hi })
+                })
+                .collect();
+            let first = spans.iter().map(|s| s.0).min().unwrap_or(0);
+            let last = spans.iter().map(|s| s.1).max().unwrap_or(0);
+            // J^m of each column on each side: `jm[(c − first) modes + m]`.
             jm.clear();
-            for c in lo..=hi {
+            for c in first..=last {
                 for (m, lam_m) in lam.iter().enumerate() {
                     let w = &self.coef[c][m][i];
                     let dot = |w: &[f64]| -> f64 { w.iter().zip(lam_m).skip(m).map(|(a, b)| a * b).sum() };
                     jm.push([dot(&w[0]), dot(&w[1])]);
                 }
             }
-            for (p, cos_phi) in cos_phis.iter().enumerate() {
-                let cos_s = (arc.cos() * cos0 + arc.sin() * sin0 * cos_phi).clamp(-1.0, 1.0);
-                let sin_s = (1.0 - cos_s * cos_s).max(0.0).sqrt();
-                let cos_scattering = mu * cos0 + sin_v * sin0 * cos_phi;
-                let cos_local = if sin_u * sin_s > 1e-12 {
-                    ((cos_scattering - u * cos_s) / (sin_u * sin_s)).clamp(-1.0, 1.0)
-                } else {
-                    1.0
-                };
-                let (c, w) = bracket(&self.zenith_rad, cos_s.acos());
-                let (c, w) = (c.clamp(lo, hi), if c < lo || c >= hi { 0.0 } else { w });
-                // Σ_m J^m cos(m φ), cos(m φ) by its recurrence.
-                let value = |c: usize| -> [f64; 2] {
-                    let (mut prev, mut cos_m) = (cos_local, 1.0);
-                    let mut sum = [0.0; 2];
-                    for j in &jm[(c - lo) * modes..(c - lo + 1) * modes] {
-                        sum[0] += j[0] * cos_m;
-                        sum[1] += j[1] * cos_m;
-                        (prev, cos_m) = (cos_m, 2.0 * cos_local * cos_m - prev);
-                    }
-                    sum
-                };
-                let a = value(c);
-                let j = if w == 0.0 {
-                    a
-                } else {
-                    let b = value(c + 1);
-                    [0, 1].map(|s| log_lerp(a[s], b[s], w))
-                };
-                at[p][i] = (j[0], j[1]);
+            for ((&(sun, phis), &(lo, hi)), at) in suns.iter().zip(&spans).zip(at.iter_mut()) {
+                let (sin0, cos0) = (sun.sin(), sun.cos());
+                for (p, phi) in phis.iter().enumerate() {
+                    let cos_phi = phi.cos();
+                    let cos_s = (arc.cos() * cos0 + arc.sin() * sin0 * cos_phi).clamp(-1.0, 1.0);
+                    let sin_s = (1.0 - cos_s * cos_s).max(0.0).sqrt();
+                    let cos_scattering = mu * cos0 + sin_v * sin0 * cos_phi;
+                    let cos_local = if sin_u * sin_s > 1e-12 {
+                        ((cos_scattering - u * cos_s) / (sin_u * sin_s)).clamp(-1.0, 1.0)
+                    } else {
+                        1.0
+                    };
+                    let (c, w) = bracket(&self.zenith_rad, cos_s.acos());
+                    let (c, w) = (c.clamp(lo, hi), if c < lo || c >= hi { 0.0 } else { w });
+                    // Σ_m J^m cos(m φ), cos(m φ) by its recurrence.
+                    let value = |c: usize| -> [f64; 2] {
+                        let (mut prev, mut cos_m) = (cos_local, 1.0);
+                        let mut sum = [0.0; 2];
+                        for j in &jm[(c - first) * modes..(c - first + 1) * modes] {
+                            sum[0] += j[0] * cos_m;
+                            sum[1] += j[1] * cos_m;
+                            (prev, cos_m) = (cos_m, 2.0 * cos_local * cos_m - prev);
+                        }
+                        sum
+                    };
+                    let a = value(c);
+                    let j = if w == 0.0 {
+                        a
+                    } else {
+                        let b = value(c + 1);
+                        [0, 1].map(|s| log_lerp(a[s], b[s], w))
+                    };
+                    at[p][i] = (j[0], j[1]);
+                }
             }
         }
         // From the ground up: each layer's source, attenuated by the layers
@@ -171,12 +192,16 @@ impl Columns {
             .collect();
         at.iter()
             .map(|at| {
-                let (mut radiance, mut below) = (0.0f64, 0.0f64);
-                for k in (0..nl).rev() {
-                    radiance += through_layer(at[k].1, at[k + 1].0, optical[k]) * (-below).exp();
-                    below += optical[k];
-                }
-                radiance
+                at.iter()
+                    .map(|at| {
+                        let (mut radiance, mut below) = (0.0f64, 0.0f64);
+                        for k in (0..nl).rev() {
+                            radiance += through_layer(at[k].1, at[k + 1].0, optical[k]) * (-below).exp();
+                            below += optical[k];
+                        }
+                        radiance
+                    })
+                    .collect()
             })
             .collect()
     }
@@ -299,24 +324,42 @@ pub(super) fn log_lerp(a: f64, b: f64, w: f64) -> f64 {
 }
 
 /// The column grid for a sun at `sun_zenith_rad` seen from the ground of
-/// `layers`: every `step_rad` on both sides of it, as far as a ray from the
-/// ground travels in arc before it leaves the atmosphere (none in a
-/// plane-parallel atmosphere), within 0 to π.
+/// `layers`: every multiple of `step_rad` from before to after the sun as
+/// far as a ray from the ground travels in arc before it leaves the
+/// atmosphere, within 0 to π; in a plane-parallel atmosphere the sun's own
+/// column alone.
 pub fn grid(layers: &Layers, sun_zenith_rad: f64, step_rad: f64) -> Vec<f64> {
     grid_reaches(layers, sun_zenith_rad, step_rad, 1.0)
 }
 
 /// `grid` to `reaches` times a ray's travel on both sides of the sun.
 pub fn grid_reaches(layers: &Layers, sun_zenith_rad: f64, step_rad: f64, reaches: f64) -> Vec<f64> {
+    grid_for_suns(layers, &[sun_zenith_rad], step_rad, reaches)
+}
+
+/// One grid for the views of every sun of `suns_rad` (the slices of a
+/// bake): multiples of `step_rad`, so that a column is the same whichever
+/// suns share it and a sun's view reads the columns its own render
+/// (`grid_reaches`) would, from `reaches` rays' travel before the lowest
+/// zenith angle to as far after the highest, within 0 to π (0 itself when
+/// it is reached); in a plane-parallel atmosphere the suns themselves.
+pub fn grid_for_suns(layers: &Layers, suns_rad: &[f64], step_rad: f64, reaches: f64) -> Vec<f64> {
     let reach = reaches
         * match (layers.shell_radius_km, layers.layers.first()) {
             (Some(r), Some(top)) => (r / (r + top.top_km)).acos(),
             _ => 0.0,
         };
-    let n = (reach / step_rad).ceil() as i64;
-    let mut zenith: Vec<f64> =
-        (-n..=n).map(|j| sun_zenith_rad + j as f64 * step_rad).filter(|&z| z > 0.0 && z < PI).collect();
-    if sun_zenith_rad - n as f64 * step_rad <= 0.0 {
+    let (lowest, highest) = suns_rad.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &s| (a.min(s), b.max(s)));
+    if reach == 0.0 {
+        let mut suns = suns_rad.to_vec();
+        suns.sort_by(f64::total_cmp);
+        suns.dedup();
+        return suns;
+    }
+    let first = ((lowest - reach) / step_rad).floor() as i64;
+    let last = ((highest + reach) / step_rad).ceil() as i64;
+    let mut zenith: Vec<f64> = (first..=last).map(|k| k as f64 * step_rad).filter(|&z| z > 0.0 && z < PI).collect();
+    if first <= 0 {
         zenith.insert(0, 0.0);
     }
     zenith
@@ -383,8 +426,16 @@ pub(super) mod tests {
             g.first().unwrap() <= &(60f64.to_radians() - reach) && g.last().unwrap() >= &(60f64.to_radians() + reach)
         );
         assert!(g.windows(2).all(|w| (w[1] - w[0] - step).abs() < 1e-12));
+        assert!(g.iter().all(|z| (z / step - (z / step).round()).abs() < 1e-9), "multiples of the step");
         assert_eq!(grid(&l, 3f64.to_radians(), step)[0], 0.0);
+        // Several suns: one grid spanning them all, each sun's own grid in it.
+        let suns = [40f64.to_radians(), 60.3f64.to_radians(), 95f64.to_radians()];
+        let all = grid_for_suns(&l, &suns, step, 1.0);
+        for &sun in &suns {
+            assert!(grid(&l, sun, step).iter().all(|z| all.iter().any(|a| (a - z).abs() < 1e-12)));
+        }
         let flat = layers("tests/atmospheres/disort_rayleigh_hg.toml", 550.0);
         assert_eq!(grid(&flat, 0.5, step), vec![0.5]);
+        assert_eq!(grid_for_suns(&flat, &[0.7, 0.5, 0.7], step, 1.0), vec![0.5, 0.7]);
     }
 }

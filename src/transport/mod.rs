@@ -21,6 +21,7 @@ pub mod adding;
 pub mod columns;
 pub mod layers;
 pub mod legendre;
+mod light;
 pub mod linalg;
 pub mod operator;
 pub mod render;

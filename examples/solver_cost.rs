@@ -1,0 +1,52 @@
+//! Where one wavelength of a deterministic bake's time goes: the layers,
+//! the daytime columns (every sun 0 to 88°), the spherical twilight
+//! columns (88 to 100°), and the diffuse light's table of one slice.
+//!
+//! cargo run --release --example solver_cost -- ATMOSPHERE [WAVELENGTH_NM] [STREAMS]
+
+use sky::atmosphere::Atmosphere;
+use sky::mie::MieCache;
+use sky::render::medium::Medium;
+use sky::transport::columns::{grid_for_suns, Columns};
+use sky::transport::layers::{Grading, Layers};
+use sky::transport::spherical::{solve, Settings};
+use std::time::Instant;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let Some(path) = args.get(1) else {
+        eprintln!("usage: solver_cost ATMOSPHERE [WAVELENGTH_NM] [STREAMS]");
+        std::process::exit(2);
+    };
+    let atm = Atmosphere::load(std::path::Path::new(path)).unwrap_or_else(|e| {
+        eprintln!("{e}");
+        std::process::exit(1)
+    });
+    let wavelength_nm: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(550.0);
+    let streams: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(16);
+    let medium = Medium::new(&atm);
+    let optics = medium.spectral(&atm, wavelength_nm, 1.0, 0.3, &MieCache::from_env());
+    let t = Instant::now();
+    let layers = Layers::new(&medium, &optics, 2 * streams, &Grading::default());
+    println!("layers: {} ({:.3} s)", layers.layers.len(), t.elapsed().as_secs_f64());
+    let step = 1f64.to_radians();
+    let day: Vec<f64> = (0..88).map(|d| (d as f64).to_radians()).collect();
+    let t = Instant::now();
+    let grid = grid_for_suns(&layers, &day, step, 1.0);
+    let n = grid.len();
+    let columns = Columns::solve(&layers, streams, grid);
+    println!("day columns: {n} ({:.3} s)", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let phis: Vec<f64> = (0..=64).map(|p| p as f64 * std::f64::consts::PI / 64.0).collect();
+    for k in 1..=128 {
+        let mu = (k as f64 / 128.0).powi(2);
+        std::hint::black_box(columns.rays(60f64.to_radians(), mu, &phis));
+    }
+    println!("one slice's table, 128 x 65 rays ({:.3} s)", t.elapsed().as_secs_f64());
+    let twilight: Vec<f64> = [88.0f64, 100.0].iter().map(|d| d.to_radians()).collect();
+    let grid = grid_for_suns(&layers, &twilight, step, 2.0);
+    let n = grid.len();
+    let t = Instant::now();
+    let (_, report) = solve(&layers, streams, grid, &Settings::default());
+    println!("twilight columns: {n}, {} passes ({:.3} s)", report.moves.len(), t.elapsed().as_secs_f64());
+}
