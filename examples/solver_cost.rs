@@ -43,6 +43,13 @@ fn main() {
         std::hint::black_box(columns.rays(60f64.to_radians(), mu, &phis));
     }
     println!("one slice's table, 128 x 65 rays ({:.3} s)", t.elapsed().as_secs_f64());
+    let t = Instant::now();
+    let suns: Vec<(f64, &[f64])> = day.iter().step_by(2).map(|&z| (z, &phis[..])).collect();
+    for k in 1..=128 {
+        let mu = (k as f64 / 128.0).powi(2);
+        std::hint::black_box(columns.rays_for_suns(&suns, mu));
+    }
+    println!("{} slices' tables at once ({:.3} s)", suns.len(), t.elapsed().as_secs_f64());
     let twilight: Vec<f64> = [88.0f64, 100.0].iter().map(|d| d.to_radians()).collect();
     let grid = grid_for_suns(&layers, &twilight, step, 2.0);
     let n = grid.len();

@@ -76,16 +76,22 @@ fn list(items: impl IntoIterator<Item = String>) -> String {
 }
 
 /// The render tasks of `bake`, as `--slice` values: every basis sky's
-/// slices, then its fog slices (see [`SliceId`](super::SliceId)).
-pub fn render_tasks(bake: &BakeFile) -> Vec<String> {
-    let sky = bake.skies.iter().flat_map(|s| (0..s.slices).map(move |i| format!("{}:{i}", s.name)));
+/// slices, then its fog slices (see [`SliceId`](super::SliceId)). By the
+/// transport solver a basis sky's slices are one task (`NAME:0,NAME:1,...`):
+/// they share one solution, which a task per slice would solve 64 times.
+pub fn render_tasks(bake: &BakeFile, method: super::Method) -> Vec<String> {
+    let per_slice = |s: &super::BasisSky| (0..s.slices).map(move |i| format!("{}:{i}", s.name)).collect::<Vec<_>>();
+    let sky: Vec<String> = match method {
+        super::Method::MonteCarlo => bake.skies.iter().flat_map(per_slice).collect(),
+        super::Method::Deterministic => bake.skies.iter().map(|s| per_slice(s).join(",")).collect(),
+    };
     let fog = bake.skies.iter().flat_map(|s| (0..s.slices).map(move |i| format!("{}:fog:{i}", s.name)));
-    sky.chain(fog).collect()
+    sky.into_iter().chain(fog).collect()
 }
 
 /// The job template of `bake` (see the module documentation).
 pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String {
-    let slices = render_tasks(bake).into_iter().map(|t| q(&t));
+    let slices = render_tasks(bake, d.method).into_iter().map(|t| q(&t));
     let common = [
         "{{Param.BakeFile}}",
         "--out",
@@ -216,10 +222,11 @@ mod tests {
             out_dir: ".".into(),
             cache_dir: Some("cache".into()),
             quality: Quality::Final,
-            method: crate::bake::Method::Deterministic,
+            method: crate::bake::Method::MonteCarlo,
             colour_space: ColourSpace::AcesCg,
         };
         let t = job_template(&bake, "sky bake-luts bake", &d);
+        assert!(t.contains("\"--method\", \"{{Param.Method}}\"") && t.contains("default: \"monte-carlo\""), "{t}");
         assert!(t.contains("specificationVersion: \"jobtemplate-2023-09\""), "{t}");
         assert!(t.contains("\"clear:0\", \"clear:1\""), "{t}");
         assert!(t.contains("\"clear:63\", \"hazed:0\"") && t.contains("\"hazed:63\", \"clear:fog:0\""), "{t}");
@@ -232,5 +239,14 @@ mod tests {
         assert_eq!(t.matches("default: \"cache\"").count(), 1);
         let bake_param = &t[t.find("name: \"BakeFile\"").unwrap()..t.find("name: \"OutDir\"").unwrap()];
         assert!(!bake_param.contains("default"), "{bake_param}");
+        // By the transport solver, a basis sky's slices are one task.
+        let solver = job_template(
+            &bake,
+            "sky bake-luts bake",
+            &PlanDefaults { method: crate::bake::Method::Deterministic, ..d },
+        );
+        let all: Vec<String> = (0..64).map(|i| format!("clear:{i}")).collect();
+        assert!(solver.contains(&format!("[\"{}\", \"hazed:0,", all.join(","))), "{solver}");
+        assert!(solver.contains("default: \"deterministic\""), "{solver}");
     }
 }

@@ -487,7 +487,7 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
     if let Err(e) = sky::atomic::write_atomically(&params_path, format!("{params:#}\n").as_bytes()) {
         return fail(format!("cannot write {}: {e}", params_path.display()));
     }
-    let tasks = bake::openjd::render_tasks(bake).len();
+    let tasks = bake::openjd::render_tasks(bake, a.method.method()).len();
     eprintln!("sky bake-luts: {} (Open Job Description): {tasks} render tasks, one per sky slice and one per fog slice, then a pack step", path.display());
     eprintln!("sky bake-luts: check it with `openjd check {}`; run it here with `openjd run {} -p file://{} --step Pack --run-dependencies`", path.display(), path.display(), params_path.display());
     if a.json {
