@@ -35,7 +35,12 @@ pub fn resolution(quality: Quality, sampling: &Sampling) -> Resolution {
         Quality::Final => 20.0,
     };
     let default = Resolution::default();
-    Resolution { ms_step_nm, streams: sampling.streams.unwrap_or(default.streams), ..default }
+    Resolution {
+        ms_step_nm,
+        streams: sampling.streams.unwrap_or(default.streams),
+        view_grid: crate::transport::render::BAKE_VIEW_GRID,
+        ..default
+    }
 }
 
 /// Every basis sky's strip of the slices to render (None for a sky with

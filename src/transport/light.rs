@@ -4,11 +4,12 @@
 //! (`Wavelength`), and the bands between spectral nodes interpolated from
 //! the nodes' light (`between_nodes`).
 //!
-//! The diffuse light is integrated along the rays of [`VIEW_NODES`] view
-//! cosines, μ_k = (k / K)², k = 1..K, dense toward the horizon where the
-//! light changes fastest, at [`AZIMUTH_INTERVALS`] + 1 azimuths from 0 to
-//! π, and interpolated between them by Catmull-Rom in √μ and in azimuth
-//! (the test below bounds what that costs against each pixel's own ray).
+//! The diffuse light is integrated along the rays of K view cosines
+//! ([`VIEW_NODES`] unless `Resolution::view_grid` says otherwise), μ_k =
+//! (k / K)², k = 1..K, dense toward the horizon where the light changes
+//! fastest, at P + 1 azimuths from 0 to π (P = [`AZIMUTH_INTERVALS`]),
+//! and interpolated between them by Catmull-Rom in √μ and in azimuth (the
+//! test below bounds what that costs against each pixel's own ray).
 
 use super::columns::{self, Columns};
 use super::layers::Layers;
@@ -24,6 +25,12 @@ pub const VIEW_NODES: usize = 128;
 
 /// How many intervals of azimuth, 0 to π, the diffuse light is solved at.
 pub const AZIMUTH_INTERVALS: usize = 64;
+
+/// The bake's grid of view cosines and azimuth intervals
+/// (`Resolution::view_grid`): half the default's rays, still within the
+/// bound of the view grid's test (8.4e-5; 64 x 32 and 64 x 48 were 1.8e-4,
+/// 128 x 32 1.3e-4).
+pub const BAKE_VIEW_GRID: (usize, usize) = (96, 40);
 
 /// How many wavelengths `render` solves for `scene` (`on_wavelength` is
 /// called after each): the bands' nodes (`spectral_nodes`) and every
@@ -158,7 +165,8 @@ impl Solved {
     /// together, a view node's ray for all their suns at once
     /// (`Columns::rays_for_suns`): a part's table is what it would be alone.
     pub(super) fn wavelengths(&self, suns_rad: &[f64], pixel_rays: &[Option<&[(usize, f64, f64)]>]) -> Vec<Wavelength> {
-        let phis = azimuth_nodes();
+        let (cosines, azimuths) = self.resolution.view_grid;
+        let phis = azimuth_nodes(azimuths);
         let mut tables: Vec<Vec<Vec<f64>>> = vec![Vec::new(); suns_rad.len()];
         for twilight in [false, true] {
             let parts: Vec<usize> = (0..suns_rad.len())
@@ -169,7 +177,7 @@ impl Solved {
             let columns = self.columns_for(suns_rad[first]);
             let suns: Vec<(f64, &[f64])> = parts.iter().map(|&k| (suns_rad[k], &phis[..])).collect();
             let by_node: Vec<Vec<Vec<f64>>> =
-                view_nodes().par_iter().map(|&mu| columns.rays_for_suns(&suns, mu)).collect();
+                view_nodes(cosines).par_iter().map(|&mu| columns.rays_for_suns(&suns, mu)).collect();
             for node in by_node {
                 for (&k, row) in parts.iter().zip(node) {
                     tables[k].push(row);
@@ -239,17 +247,18 @@ impl Wavelength {
             DiffuseLight::Pixels(p) => return p[pixel],
             DiffuseLight::Table(t) => t,
         };
-        let last = VIEW_NODES as isize;
-        let s = (mu.max(0.0).sqrt() * VIEW_NODES as f64).clamp(1.0, last as f64);
+        let (nodes, intervals) = (table.len(), table[0].len() - 1);
+        let last = nodes as isize;
+        let s = (mu.max(0.0).sqrt() * nodes as f64).clamp(1.0, last as f64);
         let k = (s.floor() as isize).min(last - 1);
         let wk = catmull_rom(s - k as f64);
         let ks = [k - 1, k, k + 1, k + 2].map(|i| (i.clamp(1, last) - 1) as usize);
         let folded = libm::atan2(phi.sin(), phi.cos()).abs();
-        let t = folded / PI * AZIMUTH_INTERVALS as f64;
-        let p = (t.floor() as isize).min(AZIMUTH_INTERVALS as isize - 1);
+        let t = folded / PI * intervals as f64;
+        let p = (t.floor() as isize).min(intervals as isize - 1);
         let wp = catmull_rom(t - p as f64);
         let ps = [p - 1, p, p + 1, p + 2].map(|i| {
-            let n = AZIMUTH_INTERVALS as isize;
+            let n = intervals as isize;
             (if i < 0 {
                 -i
             } else if i > n {
@@ -299,13 +308,13 @@ fn catmull_rom(t: f64) -> [f64; 4] {
 }
 
 /// The view cosines the diffuse light is solved at.
-fn view_nodes() -> Vec<f64> {
-    (1..=VIEW_NODES).map(|k| (k as f64 / VIEW_NODES as f64).powi(2)).collect()
+fn view_nodes(count: usize) -> Vec<f64> {
+    (1..=count).map(|k| (k as f64 / count as f64).powi(2)).collect()
 }
 
 /// The azimuths from the sun's the diffuse light is solved at, 0 to π.
-fn azimuth_nodes() -> Vec<f64> {
-    (0..=AZIMUTH_INTERVALS).map(|p| p as f64 * PI / AZIMUTH_INTERVALS as f64).collect()
+fn azimuth_nodes(intervals: usize) -> Vec<f64> {
+    (0..=intervals).map(|p| p as f64 * PI / intervals as f64).collect()
 }
 
 #[cfg(test)]
@@ -321,17 +330,30 @@ mod tests {
     /// each ray, in the hazed slab (the aerosol's forward lobe makes the
     /// most structure in azimuth) and in the clear sky in shells, for a
     /// high and a low sun, from the zenith to 0.1° above the horizon, at
-    /// azimuths between the nodes. Bound: 1e-4 of the radiance (measured:
-    /// 7.8e-6, the hazed slab, sun 25°; 6.2e-6 with 256 view nodes, 8.4e-5
-    /// with 40 azimuth intervals).
+    /// azimuths between the nodes. Bound: 1e-4 of the radiance, on the
+    /// default grid and on the bake's (`BAKE_VIEW_GRID`) (measured: 7.8e-6,
+    /// the hazed slab, sun 25°; 6.2e-6 with 256 view nodes, 8.4e-5 with 40
+    /// azimuth intervals; the bake's 96 x 40, 8.4e-5).
     #[test]
     fn the_view_grid_interpolates_the_diffuse_light_within_1e_4() {
         let mus: Vec<f64> = (0..40)
             .map(|i| (0.1f64.to_radians()).sin().max(1e-3) + (i as f64 / 39.0).powi(3))
             .map(|m| m.min(1.0))
             .collect();
-        let phis: Vec<f64> =
-            [0.3, 1.0, 1.5, 2.2, 3.0].iter().map(|p| p + 0.37 * PI / AZIMUTH_INTERVALS as f64).collect();
+        for (view_nodes_n, intervals) in [(VIEW_NODES, AZIMUTH_INTERVALS), BAKE_VIEW_GRID] {
+            let worst = view_grid_error(&mus, view_nodes_n, intervals);
+            eprintln!(
+                "{view_nodes_n} x {intervals}: worst interpolation error {:.2e} ({}, sun {:.0} deg, view cosine {:.4}, azimuth {:.2})",
+                worst.0, worst.1, worst.2, worst.3, worst.4
+            );
+            assert!(worst.0 < 1e-4, "{view_nodes_n} x {intervals}: {worst:?}");
+        }
+    }
+
+    /// The worst relative error of the diffuse light interpolated on a grid
+    /// of `nodes` view cosines and `intervals` azimuth intervals (see above).
+    fn view_grid_error(mus: &[f64], nodes: usize, intervals: usize) -> (f64, &'static str, f64, f64, f64) {
+        let phis: Vec<f64> = [0.3, 1.0, 1.5, 2.2, 3.0].iter().map(|p| p + 0.37 * PI / intervals as f64).collect();
         let mut worst = (0.0f64, "", 0.0, 0.0, 0.0);
         for file in ["tests/atmospheres/disort_rayleigh_hg.toml", "atmospheres/clear.toml"] {
             let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(file);
@@ -341,16 +363,16 @@ mod tests {
             let layers = Layers::new(&medium, &optics, 32, &Grading::default());
             for sun in [25f64.to_radians(), 81f64.to_radians()] {
                 let columns = Columns::solve(&layers, 16, columns::grid(&layers, sun, 1f64.to_radians()));
-                let phi_nodes = azimuth_nodes();
+                let phi_nodes = azimuth_nodes(intervals);
                 let grid = Wavelength {
                     diffuse: DiffuseLight::Table(
-                        view_nodes().iter().map(|&mu| columns.rays(sun, mu, &phi_nodes)).collect(),
+                        view_nodes(nodes).iter().map(|&mu| columns.rays(sun, mu, &phi_nodes)).collect(),
                     ),
                     ground_irradiance: 0.0,
                     sun_transmittance: 0.0,
                     ground_albedo: 0.3,
                 };
-                for &mu in &mus {
+                for &mu in mus {
                     for (want, &phi) in columns.rays(sun, mu, &phis).iter().zip(&phis) {
                         let rel = (grid.diffuse_radiance(0, mu, phi) - want).abs() / want;
                         if rel > worst.0 {
@@ -360,11 +382,7 @@ mod tests {
                 }
             }
         }
-        eprintln!(
-            "worst interpolation error {:.2e} ({}, sun {:.0} deg, view cosine {:.4}, azimuth {:.2})",
-            worst.0, worst.1, worst.2, worst.3, worst.4
-        );
-        assert!(worst.0 < 1e-4, "{worst:?}");
+        worst
     }
 
     /// Catmull-Rom reproduces a cubic's values at the nodes and sums to one.

@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// The solver's resolutions.
-pub use super::light::{wavelengths_solved, AZIMUTH_INTERVALS, VIEW_NODES};
+pub use super::light::{wavelengths_solved, AZIMUTH_INTERVALS, BAKE_VIEW_GRID, VIEW_NODES};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Resolution {
@@ -48,13 +48,23 @@ pub struct Resolution {
     /// the two nearest (`spectral_nodes`). 0: every band. Spectral lines
     /// are always solved.
     pub ms_step_nm: f64,
+    /// The diffuse light's table for views of many pixels: view cosines
+    /// and intervals of azimuth from 0 to π (`light`).
+    pub view_grid: (usize, usize),
 }
 
 impl Default for Resolution {
     /// 16 streams a hemisphere: within 0.05 % of DISORT on the clear and
     /// hazed slabs (tests/transport.rs); the cloud slabs need 32.
     fn default() -> Resolution {
-        Resolution { streams: 16, grading: Grading::default(), column_step_deg: 1.0, spherical: false, ms_step_nm: 0.0 }
+        Resolution {
+            streams: 16,
+            grading: Grading::default(),
+            column_step_deg: 1.0,
+            spherical: false,
+            ms_step_nm: 0.0,
+            view_grid: (VIEW_NODES, AZIMUTH_INTERVALS),
+        }
     }
 }
 
@@ -301,10 +311,15 @@ mod tests {
         };
         let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let suns_deg = [30.0, 89.0, 95.0];
+        // Slices of more pixels looking up than `PIXEL_RAYS`: the tables'
+        // rays are shared among the suns (`Columns::rays_for_suns`).
+        const W: usize = 20;
+        const H: usize = 30;
         let slice = |sun_deg: f64| {
             let mut v = View::directions(vec![], sun_deg, 0.0, 1, 1);
             let mapping = DirectionMapping::new(sun_deg, 87.9);
-            (v.camera, v.width, v.height, v.sun_disk) = (Camera::Lut { mapping, sun_azimuth_deg: 0.0 }, 3, 8, false);
+            let camera = Camera::Lut { mapping, sun_azimuth_deg: 0.0 };
+            (v.camera, v.width, v.height, v.sun_disk) = (camera, W, H, false);
             v
         };
         let mut strip = slice(suns_deg[0]);
@@ -312,14 +327,16 @@ mod tests {
             mappings: suns_deg.iter().map(|&z| DirectionMapping::new(z, 87.9)).collect(),
             sun_azimuth_deg: 0.0,
         };
-        strip.width = 3 * suns_deg.len();
+        strip.width = W * suns_deg.len();
+        assert!(suns_deg.iter().all(|&z| rays_up(&slice(z)).len() > PIXEL_RAYS), "the tables' path");
         for ms_step_nm in [0.0, 250.0] {
-            let resolution = Resolution { streams: 4, column_step_deg: 3.0, ms_step_nm, ..Default::default() };
+            let resolution =
+                Resolution { streams: 4, column_step_deg: 3.0, ms_step_nm, view_grid: (16, 8), ..Default::default() };
             let together = render(&scene, &strip, &resolution, &|| {}).unwrap();
             for (k, &sun) in suns_deg.iter().enumerate() {
                 let alone = render(&scene, &slice(sun), &resolution, &|| {}).unwrap();
                 for (i, p) in alone.pixels.iter().enumerate() {
-                    let q = &together.pixels[(i / 3) * strip.width + 3 * k + i % 3];
+                    let q = &together.pixels[(i / W) * strip.width + W * k + i % W];
                     assert_eq!(p.xyz, q.xyz, "sun {sun}, texel {i}, ms step {ms_step_nm} nm");
                     assert!(p.xyz[1] > 0.0, "sun {sun}, texel {i}: {:?}", p.xyz);
                 }
