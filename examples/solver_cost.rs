@@ -2,7 +2,9 @@
 //! the daytime columns (every sun 0 to 88°), the spherical twilight
 //! columns (88 to 100°), and the diffuse light's table of one slice.
 //!
-//! cargo run --release --example solver_cost -- ATMOSPHERE [WAVELENGTH_NM] [STREAMS]
+//! cargo run --release --example solver_cost -- ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft]
+//!
+//! `draft`: the twilight iteration's draft settings (`spherical::Settings::draft`).
 
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -15,7 +17,7 @@ use std::time::Instant;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        eprintln!("usage: solver_cost ATMOSPHERE [WAVELENGTH_NM] [STREAMS]");
+        eprintln!("usage: solver_cost ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft]");
         std::process::exit(2);
     };
     let atm = Atmosphere::load(std::path::Path::new(path)).unwrap_or_else(|e| {
@@ -54,6 +56,13 @@ fn main() {
     let grid = grid_for_suns(&layers, &twilight, step, 2.0);
     let n = grid.len();
     let t = Instant::now();
-    let (_, report) = solve(&layers, streams, grid, &Settings::default());
-    println!("twilight columns: {n}, {} passes ({:.3} s)", report.moves.len(), t.elapsed().as_secs_f64());
+    let settings =
+        if args.get(4).map(String::as_str) == Some("draft") { Settings::draft() } else { Settings::default() };
+    let (_, report) = solve(&layers, streams, grid, &settings);
+    println!(
+        "twilight columns: {n}, {} passes ({:.3} s); moves {:?}",
+        report.moves.len() + 1,
+        t.elapsed().as_secs_f64(),
+        report.moves
+    );
 }

@@ -16,31 +16,42 @@ use super::{BakeError, BakeEvent, Quality, Sampling};
 use crate::render::View;
 use crate::session::Session;
 use crate::transport::render::{render, Resolution};
+use crate::transport::spherical::Detail;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
 
-/// The solver's resolutions for a bake of `quality`: the defaults
-/// (`transport::render::Resolution`), with the multiply scattered light
-/// solved at bands 20 nm apart (final) or 40 nm apart (draft) and
-/// interpolated between. Measured on a fisheye by `examples/spectral_nodes`
+/// The solver's resolutions for a bake of `quality`.
+///
+/// Final: the defaults (`transport::render::Resolution`: 16 streams, the
+/// sun-angle columns 1° apart), the multiply scattered light solved at
+/// bands 20 nm apart and interpolated between, the diffuse light's table
+/// at `BAKE_VIEW_GRID`. Measured on a fisheye by `examples/spectral_nodes`
 /// against every 5 nm band solved (clear.toml at sun 60°, hazed.toml at
-/// 85°): 20 nm apart, Y within 0.06 % and CIEDE2000 within 0.28; 40 nm
-/// apart, Y within 0.43 % and CIEDE2000 within 0.38, at a seventh of the
-/// cost (80 nm apart: Y off by up to 1.2 %).
-/// A preset's `streams` replaces the default 16.
+/// 85°): 20 nm apart, Y within 0.06 % and CIEDE2000 within 0.28.
+///
+/// Draft: 8 streams, bands 80 nm apart, a table of 64 x 32 views, the
+/// twilight iteration's draft settings (`spherical::Settings::draft`).
+/// Measured against the final on `bakes/demo.toml`'s clear sky
+/// (`examples/draft_error`, 2026-12-07; the draft preset's 20 nm bands
+/// against the final's 5 nm; docs/bakes.md "The method"): slices 0 to 36
+/// (suns 0 to 87.5°, with 96 x 40 views) Y median 0.53 %, p99 1.58 %, 13
+/// times faster; slices 40 to 58 (suns 88.5 to 94.4°, the full twilight
+/// iteration) median 0.5 to 1.4 % a slice, p99 under 2.1 %; slice 58 with
+/// the draft iteration 1.49 % and 3.1 %, 35 times faster; slice 63 (sun
+/// 100°) 21 % (the multiply scattered light between spectral nodes, nearly
+/// all the light there, is no power law in wavelength). Columns 2° apart
+/// would halve the daytime cost but miss twilight by 8 to 14 % (the
+/// sources are interpolated in the local sun angle).
+///
+/// A preset's `streams` replaces either default.
 pub fn resolution(quality: Quality, sampling: &Sampling) -> Resolution {
-    let ms_step_nm = match quality {
-        Quality::Draft => 40.0,
-        Quality::Final => 20.0,
-    };
     let default = Resolution::default();
-    Resolution {
-        ms_step_nm,
-        streams: sampling.streams.unwrap_or(default.streams),
-        view_grid: crate::transport::render::BAKE_VIEW_GRID,
-        ..default
-    }
+    let (streams, ms_step_nm, view_grid, twilight) = match quality {
+        Quality::Draft => (8, 80.0, crate::transport::render::DRAFT_VIEW_GRID, Detail::Draft),
+        Quality::Final => (default.streams, 20.0, crate::transport::render::BAKE_VIEW_GRID, Detail::Full),
+    };
+    Resolution { ms_step_nm, streams: sampling.streams.unwrap_or(streams), view_grid, twilight, ..default }
 }
 
 /// Every basis sky's strip of the slices to render (None for a sky with

@@ -47,6 +47,17 @@ impl Grading {
             max_km: 0.5 * self.max_km,
         }
     }
+
+    /// Every resolution doubled (a draft bake's layers: 0.51 % off DISORT
+    /// at 89° in the Rayleigh + HG slab, see `default`).
+    pub fn coarser(&self) -> Grading {
+        Grading {
+            first_tau: 2.0 * self.first_tau,
+            growth: 2.0 * self.growth,
+            max_tau: 2.0 * self.max_tau,
+            max_km: 2.0 * self.max_km,
+        }
+    }
 }
 
 /// One homogeneous layer.

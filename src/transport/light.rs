@@ -32,6 +32,10 @@ pub const AZIMUTH_INTERVALS: usize = 64;
 /// 128 x 32 1.3e-4).
 pub const BAKE_VIEW_GRID: (usize, usize) = (96, 40);
 
+/// The draft bake's grid (`bake::solver::resolution`): a third of the
+/// default's rays; the view grid's test bounds it at 3e-4 (measured 1.8e-4).
+pub const DRAFT_VIEW_GRID: (usize, usize) = (64, 32);
+
 /// How many wavelengths `render` solves for `scene` (`on_wavelength` is
 /// called after each): the bands' nodes (`spectral_nodes`) and every
 /// spectral line.
@@ -140,7 +144,7 @@ impl Solved {
             let span = [SPHERICAL_FROM_SUN_ZENITH_DEG.to_radians(), MAX_SUN_ZENITH_DEG.to_radians()];
             let suns: Vec<f64> = twilight.iter().chain(&span).copied().collect();
             let grid = columns::grid_for_suns(&layers, &suns, step_rad, 2.0);
-            super::spherical::solve(&layers, resolution.streams, grid, &super::spherical::Settings::default()).0
+            super::spherical::solve(&layers, resolution.streams, grid, &resolution.twilight.settings()).0
         });
         Solved { layers, resolution: *resolution, day, twilight }
     }
@@ -333,20 +337,22 @@ mod tests {
     /// azimuths between the nodes. Bound: 1e-4 of the radiance, on the
     /// default grid and on the bake's (`BAKE_VIEW_GRID`) (measured: 7.8e-6,
     /// the hazed slab, sun 25°; 6.2e-6 with 256 view nodes, 8.4e-5 with 40
-    /// azimuth intervals; the bake's 96 x 40, 8.4e-5).
+    /// azimuth intervals; the bake's 96 x 40, 8.4e-5). The draft bake's
+    /// 64 x 32: bound 3e-4 (measured 1.8e-4).
     #[test]
     fn the_view_grid_interpolates_the_diffuse_light_within_1e_4() {
         let mus: Vec<f64> = (0..40)
             .map(|i| (0.1f64.to_radians()).sin().max(1e-3) + (i as f64 / 39.0).powi(3))
             .map(|m| m.min(1.0))
             .collect();
-        for (view_nodes_n, intervals) in [(VIEW_NODES, AZIMUTH_INTERVALS), BAKE_VIEW_GRID] {
+        let grids = [((VIEW_NODES, AZIMUTH_INTERVALS), 1e-4), (BAKE_VIEW_GRID, 1e-4), (DRAFT_VIEW_GRID, 3e-4)];
+        for ((view_nodes_n, intervals), bound) in grids {
             let worst = view_grid_error(&mus, view_nodes_n, intervals);
             eprintln!(
                 "{view_nodes_n} x {intervals}: worst interpolation error {:.2e} ({}, sun {:.0} deg, view cosine {:.4}, azimuth {:.2})",
                 worst.0, worst.1, worst.2, worst.3, worst.4
             );
-            assert!(worst.0 < 1e-4, "{view_nodes_n} x {intervals}: {worst:?}");
+            assert!(worst.0 < bound, "{view_nodes_n} x {intervals}: {worst:?}");
         }
     }
 

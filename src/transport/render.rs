@@ -29,7 +29,7 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// The solver's resolutions.
-pub use super::light::{wavelengths_solved, AZIMUTH_INTERVALS, BAKE_VIEW_GRID, VIEW_NODES};
+pub use super::light::{wavelengths_solved, AZIMUTH_INTERVALS, BAKE_VIEW_GRID, DRAFT_VIEW_GRID, VIEW_NODES};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Resolution {
@@ -51,6 +51,8 @@ pub struct Resolution {
     /// The diffuse light's table for views of many pixels: view cosines
     /// and intervals of azimuth from 0 to π (`light`).
     pub view_grid: (usize, usize),
+    /// The spherical source iteration's settings (`spherical::Detail`).
+    pub twilight: super::spherical::Detail,
 }
 
 impl Default for Resolution {
@@ -64,6 +66,7 @@ impl Default for Resolution {
             spherical: false,
             ms_step_nm: 0.0,
             view_grid: (VIEW_NODES, AZIMUTH_INTERVALS),
+            twilight: super::spherical::Detail::Full,
         }
     }
 }

@@ -84,6 +84,44 @@ impl Default for Settings {
     }
 }
 
+impl Settings {
+    /// Coarser settings for a draft bake: every other node level, Fourier
+    /// modes up to 4 on 8 intervals of azimuth, half the table's cosines,
+    /// and a stopping tolerance of 3e-3. What it costs in the answer is
+    /// measured against the defaults by `examples/draft_error`
+    /// (`bake::solver::resolution`).
+    pub fn draft() -> Settings {
+        let full = Settings::default();
+        Settings {
+            levels_km: full.levels_km.iter().step_by(2).copied().collect(),
+            modes: 4,
+            azimuth_intervals: 8,
+            table_cosines: 65,
+            tolerance: 3e-3,
+            ..full
+        }
+    }
+}
+
+/// Which of the iteration's settings a render takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Detail {
+    /// `Settings::default()`: judged against the path tracer.
+    #[default]
+    Full,
+    /// `Settings::draft()`.
+    Draft,
+}
+
+impl Detail {
+    pub fn settings(self) -> Settings {
+        match self {
+            Detail::Full => Settings::default(),
+            Detail::Draft => Settings::draft(),
+        }
+    }
+}
+
 /// How the iteration went.
 #[derive(Debug, Clone, Default)]
 pub struct Report {
@@ -350,14 +388,19 @@ type NodeModes = Vec<Vec<(Vec<f64>, Vec<f64>)>>;
 type Coefficients = Vec<Vec<Vec<Vec<f64>>>>;
 
 /// The largest move of a node's coefficient from `previous`, relative to
-/// the largest isotropic coefficient of its column.
+/// the largest isotropic coefficient of its column; infinite where a
+/// coefficient is not finite (so that the iteration does not stop on it).
 fn largest_move(at_levels: &Coefficients, previous: &Coefficients) -> f64 {
     let mut largest = 0.0f64;
     for (c, column) in at_levels.iter().enumerate() {
         let scale = column[0].iter().map(|a| a[0].abs()).fold(0.0, f64::max).max(1e-300);
         for (m, per_level) in column.iter().enumerate() {
             for (lv, a) in per_level.iter().enumerate() {
-                let moved = a.iter().zip(&previous[c][m][lv]).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+                let moved = a
+                    .iter()
+                    .zip(&previous[c][m][lv])
+                    .map(|(x, y)| if x.is_finite() { (x - y).abs() } else { f64::INFINITY })
+                    .fold(0.0, f64::max);
                 largest = largest.max(moved / scale);
             }
         }
