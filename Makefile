@@ -123,7 +123,7 @@ PREVIEW_TIMES := 06:00 09:00 12:00 17:00 19:00
 PREVIEW_WEATHERS := clear:0:0:0 hazy:0.6:0:0.15 cumulus:0.2:0:0.5 cloudy:0.3:0.3:0.75
 preview-sheet: build lavapipe
 	@mkdir -p $(OUT)/preview-sheet docs/images/preview
-	$(SKY) bake-luts bakes/look.toml --out $(OUT)/look-luts --quality draft
+	$(SKY) bake-luts bakes/look.toml --out $(OUT)/look-luts --quality draft --method monte-carlo
 	for w in $(PREVIEW_WEATHERS); do \
 	  name=$${w%%:*}; rest=$${w#*:}; h=$${rest%%:*}; rest=$${rest#*:}; c=$${rest%%:*}; k=$${rest#*:}; \
 	  for t in $(PREVIEW_TIMES); do \
@@ -190,7 +190,7 @@ lut-figures: build
 # cores, most of it the thick cloudy skies.
 PROBE_SLICES ?= 0 5 28 53 60
 final-cost: build
-	$(SKY) bake-luts bakes/cost-probe.toml --out $(OUT)/cost-probe --quality final --json \
+	$(SKY) bake-luts bakes/cost-probe.toml --out $(OUT)/cost-probe --quality final --method monte-carlo --json \
 	  --slice $(subst $(space),$(comma),$(foreach s,clear hazed cloudy0 cloudy1 cloudy2 cloudy3 cloudy4 cloudy5,$(foreach i,$(PROBE_SLICES),$(s):$(i)))) > $(OUT)/cost-probe.json
 	python3 scripts/final_cost.py $(OUT)/cost-probe.json 16 64
 
@@ -208,5 +208,5 @@ fuzz:
 # (bakes/fog-look.toml, about 8 minutes on 2 cores), decoded with ridges at 2 to 100 km at three
 # times of day.
 fog-pictures: build
-	$(SKY) bake-luts bakes/fog-look.toml --out $(OUT)/fog-look
+	$(SKY) bake-luts bakes/fog-look.toml --out $(OUT)/fog-look --method monte-carlo
 	for e in 35 8 2; do $(SKY) lut decode $(OUT)/fog-look/manifest.json --sun-elevation-deg $$e --sun-azimuth-deg 120 --haziness 0.15 --camera pinhole --look-elevation-deg 4 --fov-deg 40 --size 480x160 --landscape --out $(OUT)/fog-look/landscape_$$e.exr --png docs/images/fog_landscape_sun_$$e.png || exit 1; done

@@ -31,7 +31,7 @@ for r in $(seq 1 "$ROUNDS"); do
         done
         rm -rf "$OUT/$b"
         t0=$(date +%s.%N)
-        "${BIN[$b]}" bake-luts "$BAKE" --out "$OUT/$b" --quality draft --workers "${addrs[0]},${addrs[1]}" >/dev/null 2>"$OUT/$b.err" || {
+        "${BIN[$b]}" bake-luts "$BAKE" --out "$OUT/$b" --quality draft --method monte-carlo --workers "${addrs[0]},${addrs[1]}" >/dev/null 2>"$OUT/$b.err" || {
             echo "the $b build's bake failed:" >&2
             tail -5 "$OUT/$b.err" >&2
             kill "${pids[@]}"

@@ -26,7 +26,7 @@ export SKY_CACHE_DIR="$work/cache"
     --out "$work/render.exr" --png "$work/render.png" >/dev/null 2>&1
 "$sky" render atmospheres/hazed.toml --camera equirect --size 32x16 --sun-zenith-deg 60 --spp 32 \
     --max-rel-error 0.2 --denoise --out "$work/adaptive.exr" >/dev/null 2>&1
-"$sky" bake-luts bakes/tiny.toml --out "$work/luts" --cache "$work/bake-cache" --quality draft >/dev/null 2>&1
+"$sky" bake-luts bakes/tiny.toml --out "$work/luts" --cache "$work/bake-cache" --quality draft --method monte-carlo >/dev/null 2>&1
 # The decoded pictures record the manifest's path as given: a relative one,
 # so that two work folders hash alike.
 cd "$work"

@@ -53,7 +53,7 @@ build() {
     RUSTFLAGS="-Cprofile-generate=$PROFILES/raw" $CARGO build --release --locked "${FEATURE_ARGS[@]}" --target-dir target/pgo-gen
     echo "== training: a draft bake of $TRAIN_BAKE" >&2
     rm -rf "$OUT/train"
-    target/pgo-gen/release/sky bake-luts "$TRAIN_BAKE" --out "$OUT/train" --quality draft >/dev/null
+    target/pgo-gen/release/sky bake-luts "$TRAIN_BAKE" --out "$OUT/train" --quality draft --method monte-carlo >/dev/null
     "$tool" merge -o "$PROFILES/sky.profdata" "$PROFILES/raw"
     echo "== optimised build (target/pgo)" >&2
     RUSTFLAGS="-Cprofile-use=$PROFILES/sky.profdata" $CARGO build --release --locked "${FEATURE_ARGS[@]}" --target-dir target/pgo
@@ -65,7 +65,7 @@ bake_seconds() {
     rm -rf "$2"
     local t0 t1
     t0=$(date +%s.%N)
-    "$1" bake-luts "$BENCH_BAKE" --out "$2" --quality draft >/dev/null
+    "$1" bake-luts "$BENCH_BAKE" --out "$2" --quality draft --method monte-carlo >/dev/null
     t1=$(date +%s.%N)
     awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }'
 }

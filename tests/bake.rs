@@ -72,7 +72,8 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake = root().join("tests/bakes/tiny.toml");
-    let args = ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
+    let args =
+        ["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
     let first = summary(&sky(&args, tmp.path()));
     // Slices 47 and 48 are both the horizon (the talk's two ranges meet
     // there): one view, rendered once, the second counted as cached.
@@ -186,22 +187,21 @@ fn a_bake_packs_reads_back_and_a_rerun_renders_nothing() {
 /// `--method deterministic` (tests/bakes/solver.toml: clear.toml in
 /// shells, so the slices from 88° on take the spherical source, at 2 x 8
 /// texels and 4 streams): every slice solved, the manifest and the
-/// summary say how, a re-run renders nothing and writes the same bytes,
-/// and the path tracer's slices are cached apart from the solver's.
+/// summary say how, a re-run without `--method` (the default) renders
+/// nothing and writes the same bytes, and the path tracer's slices are
+/// cached apart from the solver's.
 #[test]
 fn a_deterministic_bake_packs_and_is_cached_apart_from_the_path_tracers() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake = root().join("tests/bakes/solver.toml");
-    let args = |method: &'static str| {
-        ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json", "--method", method]
-            .map(String::from)
+    // `None`: no --method, the default.
+    let run = |method: Option<&str>| {
+        let mut a = vec!["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
+        a.extend(method.map(|m| ["--method", m]).into_iter().flatten());
+        summary(&sky(&a, tmp.path()))
     };
-    let run = |method: &'static str| {
-        let a = args(method);
-        summary(&sky(&a.iter().map(String::as_str).collect::<Vec<_>>(), tmp.path()))
-    };
-    let first = run("deterministic");
+    let first = run(Some("deterministic"));
     assert_eq!(first["method"], "deterministic");
     assert_eq!(rendered(&first), [("clear".to_string(), 63, 1)]);
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
@@ -216,11 +216,13 @@ fn a_deterministic_bake_packs_and_is_cached_apart_from_the_path_tracers() {
     let files = ["clear.ktx2", "transmittance.ktx2", "manifest.json"];
     let read = || files.map(|f| std::fs::read(out.join(f)).unwrap());
     let before = read();
-    let again = run("deterministic");
+    // The default is the solver: the same slices, found in the cache.
+    let again = run(None);
+    assert_eq!(again["method"], "deterministic");
     assert_eq!(rendered(&again), [("clear".to_string(), 0, 64)]);
     assert!(before == read(), "a re-run from the cache changed the files");
     // The path tracer's slices are other slices: rendered, not found.
-    let traced = run("monte-carlo");
+    let traced = run(Some("monte-carlo"));
     assert_eq!(rendered(&traced), [("clear".to_string(), 63, 1)]);
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     assert_eq!(luts.manifest.method.as_deref(), Some("monte-carlo"));
@@ -232,7 +234,18 @@ fn a_bake_carries_the_fog_luts() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake_path = root().join("tests/bakes/tiny.toml");
-    summary(&sky(&["bake-luts", bake_path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    summary(&sky(
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bake_path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ],
+        tmp.path(),
+    ));
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     let f = luts.manifest.fog.as_ref().expect("a fog entry");
     assert_eq!((f.vk_format, f.width, f.height, f.layers, f.ceiling_km), (97, 8, 8, 2 * 2 * 64, 3.0));
@@ -343,7 +356,18 @@ fn a_draft_forecasts_its_cost_from_probes() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake = root().join("tests/bakes/tiny.toml");
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json-progress"], tmp.path());
+    let o = sky(
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bake.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json-progress",
+        ],
+        tmp.path(),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let events: Vec<serde_json::Value> =
         String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
@@ -411,7 +435,17 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
         format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
     std::fs::write(&bake, text).unwrap();
     let o = sky(
-        &["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"],
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bake.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--quality",
+            "final",
+            "--json-progress",
+        ],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -452,6 +486,8 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
         let o = sky(
             &[
                 "bake-luts",
+                "--method",
+                "monte-carlo",
                 bake.to_str().unwrap(),
                 "--out",
                 out.to_str().unwrap(),
@@ -503,6 +539,8 @@ fn a_bake_with_a_grid_of_multiple_scattering() {
         bake_events(
             &[
                 "bake-luts",
+                "--method",
+                "monte-carlo",
                 file.to_str().unwrap(),
                 "--out",
                 out,
@@ -595,7 +633,17 @@ fn a_bake_renders_the_shadowed_fog_at_a_size_of_its_own() {
     let cache = tmp.path().join("cache");
     let bake = |file: &Path, out: &str| {
         let events = bake_events(
-            &["bake-luts", file.to_str().unwrap(), "--out", out, "--cache", cache.to_str().unwrap(), "--json-progress"],
+            &[
+                "bake-luts",
+                "--method",
+                "monte-carlo",
+                file.to_str().unwrap(),
+                "--out",
+                out,
+                "--cache",
+                cache.to_str().unwrap(),
+                "--json-progress",
+            ],
             tmp.path(),
         );
         events.into_iter().find(|e| e["event"] == "planned").expect("a planned event")
@@ -643,7 +691,10 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let first = tmp.path().join("first");
-    let o = sky(&["bake-luts", bake.to_str().unwrap(), "--out", first.to_str().unwrap()], tmp.path());
+    let o = sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", first.to_str().unwrap()],
+        tmp.path(),
+    );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cache = sky::bake::SliceCache::open(&first.join("cache")).unwrap();
     // A sky's slice (4 wide), not a fog slice (8 x 8: the same cache).
@@ -662,6 +713,8 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     let o = sky(
         &[
             "bake-luts",
+            "--method",
+            "monte-carlo",
             bake.to_str().unwrap(),
             "--out",
             second.to_str().unwrap(),
@@ -704,7 +757,10 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
     let atm_path = root().join("atmospheres/clear.toml");
     std::fs::write(&bake, format!("[quality.draft]\nband_nm = 20.0\nspp = 1\n\n[[sky]]\nname = \"clear\"\natmosphere = {:?}\nwidth = 4\nheight = 16\n", atm_path.to_str().unwrap())).unwrap();
     let out = tmp.path().join("luts");
-    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    summary(&sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
+        tmp.path(),
+    ));
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     let t = luts.manifest.transmittance.as_ref().expect("a transmittance entry");
     assert_eq!((t.vk_format, t.width, t.height, t.layers.clone()), (97, 256, 64, vec!["clear".to_string()]));
@@ -859,7 +915,8 @@ fn changing_one_atmosphere_rerenders_only_its_slices() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = copy_tree(tmp.path());
     let out = tmp.path().join("luts");
-    let args = ["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
+    let args =
+        ["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"];
     summary(&sky(&args, tmp.path()));
     // The atmosphere's content hash covers its text: one more line changes it.
     let hazed = tmp.path().join("tests/atmospheres/disort_rayleigh_hg.toml");
@@ -874,7 +931,7 @@ fn changing_one_atmosphere_rerenders_only_its_slices() {
 /// stderr to `stderr`.
 fn spawn_bake(bake: &Path, out: &Path, stderr: Stdio) -> std::process::Child {
     Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args(["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap()])
         .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
         .stdout(Stdio::null())
         .stderr(stderr)
@@ -917,8 +974,10 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     let done = files(&cache, "slice").len();
     assert!(done == 0 || done == 63, "{done} slices cached when the bake was killed: a sky's are cached together");
     assert!(!out.join("manifest.json").exists());
-    let resumed =
-        summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let resumed = summary(&sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
+        tmp.path(),
+    ));
     let total: u64 = rendered(&resumed).iter().map(|r| r.1).sum();
     // 126 distinct views: slices 47 and 48 of each sky share one.
     assert_eq!(total, 126 - done as u64, "{resumed}");
@@ -929,7 +988,10 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     assert!(files(&cache, "journal").is_empty());
     // The same bytes as a bake that was never interrupted.
     let fresh = tmp.path().join("fresh");
-    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"], tmp.path()));
+    summary(&sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"],
+        tmp.path(),
+    ));
     for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2"] {
         assert!(
             std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(),
@@ -954,8 +1016,10 @@ fn ctrl_c_stops_a_bake_that_then_resumes() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(err.contains("cancelled; nothing was packed") && err.contains("the same command resumes"), "{err}");
     assert!(!out.join("manifest.json").exists());
-    let resumed =
-        summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    let resumed = summary(&sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
+        tmp.path(),
+    ));
     let columns_resumed: u64 =
         resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
     assert!(columns_resumed > 0, "{resumed}");
@@ -970,6 +1034,8 @@ fn a_slice_goes_only_into_the_cache() {
     let s = summary(&sky(
         &[
             "bake-luts",
+            "--method",
+            "monte-carlo",
             bake.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
@@ -991,16 +1057,38 @@ fn a_slice_goes_only_into_the_cache() {
     assert!(fog["core_seconds"].as_f64().unwrap() > 0.0 && fog["texels"] == 64, "{fog}");
     assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 3);
     assert!(!out.join("manifest.json").exists());
-    let o =
-        sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
+    let o = sky(
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bake.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--slice",
+            "cloudy3:1",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&o.stderr).contains("--slice cloudy3:1: no such basis sky or slice"),
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let o =
-        sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:64"], tmp.path());
+    let o = sky(
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bake.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--slice",
+            "clear:64",
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
@@ -1010,7 +1098,17 @@ fn bad_bake_files_are_located_errors() {
     let bad = tmp.path().join("bad.toml");
     std::fs::write(&bad, "[[sky]]\nname = \"clear\"\natmosphere = \"missing.toml\"\nwidth = 32\nheight = 128\n")
         .unwrap();
-    let o = sky(&["bake-luts", bad.to_str().unwrap(), "--out", tmp.path().join("o").to_str().unwrap()], tmp.path());
+    let o = sky(
+        &[
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            bad.to_str().unwrap(),
+            "--out",
+            tmp.path().join("o").to_str().unwrap(),
+        ],
+        tmp.path(),
+    );
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml:3: sky \"clear\": atmosphere file") && err.contains("not found"), "{err}");
@@ -1049,7 +1147,10 @@ fn lut_verify_reports_every_elevation() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("luts");
-    summary(&sky(&["bake-luts", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
+    summary(&sky(
+        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
+        tmp.path(),
+    ));
     let m = out.join("manifest.json");
     let plots = tmp.path().join("plots");
     let o = sky(

@@ -995,6 +995,8 @@ fn a_bake_through_two_workers_bakes_the_embedded_workers_bytes() {
         let o = Command::new(SKY)
             .args([
                 "bake-luts",
+                "--method",
+                "monte-carlo",
                 bake.to_str().unwrap(),
                 "--out",
                 farm.path(out).to_str().unwrap(),

@@ -48,7 +48,17 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let job = tmp.path().join("job");
-    let plan = run(&mut sky(&["bake-luts", s(&bake), "--out", s(&job), "--plan", "openjd", "--json"]));
+    let plan = run(&mut sky(&[
+        "bake-luts",
+        "--method",
+        "monte-carlo",
+        s(&bake),
+        "--out",
+        s(&job),
+        "--plan",
+        "openjd",
+        "--json",
+    ]));
     let summary: serde_json::Value = serde_json::from_slice(&plan.stdout).unwrap();
     // Each sky's 64 slices and 64 fog slices.
     assert_eq!(summary["render_tasks"], 256);
@@ -73,7 +83,7 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
     assert!(log.contains("Chunks run: 257"), "256 render tasks and the pack step:\n{log}");
 
     let direct = tmp.path().join("direct");
-    run(&mut sky(&["bake-luts", s(&bake), "--out", s(&direct)]));
+    run(&mut sky(&["bake-luts", "--method", "monte-carlo", s(&bake), "--out", s(&direct)]));
     for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2", "fog.ktx2", "attenuation.ktx2", "manifest.json"] {
         let (a, b) = (std::fs::read(direct.join(f)).unwrap(), std::fs::read(job.join(f)).unwrap());
         assert!(a == b, "{f}: the job's file differs from the direct bake's");
@@ -91,10 +101,20 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
         .unwrap();
     std::fs::remove_file(first).unwrap();
     let again = tmp.path().join("again");
-    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
-        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
-        .output()
-        .unwrap();
+    let o = sky(&[
+        "bake-luts",
+        "--method",
+        "monte-carlo",
+        s(&bake),
+        "--out",
+        s(&again),
+        "--cache",
+        s(&cache),
+        "--pack-only",
+    ])
+    .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+    .output()
+    .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     // Slices 47 and 48 are both the horizon (the talk's two ranges meet
@@ -115,10 +135,20 @@ fn an_openjd_job_bakes_the_same_bytes_as_a_direct_bake() {
             std::fs::remove_file(p).unwrap();
         }
     }
-    let o = sky(&["bake-luts", s(&bake), "--out", s(&again), "--cache", s(&cache), "--pack-only"])
-        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
-        .output()
-        .unwrap();
+    let o = sky(&[
+        "bake-luts",
+        "--method",
+        "monte-carlo",
+        s(&bake),
+        "--out",
+        s(&again),
+        "--cache",
+        s(&cache),
+        "--pack-only",
+    ])
+    .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+    .output()
+    .unwrap();
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("clear:fog:0, clear:fog:1"), "{err}");
@@ -131,11 +161,13 @@ fn a_plan_takes_no_farm_and_no_slice() {
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("job");
     for extra in [&["--workers", "127.0.0.1:1"][..], &["--slice", "clear:3"], &["--pack-only"]] {
-        let mut args = vec!["bake-luts", s(&bake), "--out", s(&out), "--plan", "openjd"];
+        let mut args = vec!["bake-luts", "--method", "monte-carlo", s(&bake), "--out", s(&out), "--plan", "openjd"];
         args.extend_from_slice(extra);
         let o = sky(&args).output().unwrap();
         assert_eq!(o.status.code(), Some(2), "{extra:?}: {}", String::from_utf8_lossy(&o.stderr));
     }
-    let o = sky(&["bake-luts", s(&bake), "--out", s(&out), "--sky-executable", "sky"]).output().unwrap();
+    let o = sky(&["bake-luts", "--method", "monte-carlo", s(&bake), "--out", s(&out), "--sky-executable", "sky"])
+        .output()
+        .unwrap();
     assert_eq!(o.status.code(), Some(2), "--sky-executable without --plan");
 }

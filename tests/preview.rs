@@ -38,7 +38,14 @@ fn shared_bake() -> &'static (tempfile::TempDir, Luts) {
 
 fn bake_into(out: &std::path::Path) -> Luts {
     let o = Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(["bake-luts", root().join("tests/bakes/preview.toml").to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .args([
+            "bake-luts",
+            "--method",
+            "monte-carlo",
+            root().join("tests/bakes/preview.toml").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ])
         .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
         .output()
         .unwrap();

@@ -61,11 +61,10 @@ impl std::fmt::Display for SliceId {
 pub enum Method {
     /// The transport solver (`transport`): no noise; the slices of a basis
     /// sky share one solution per wavelength, on this process's cores.
+    #[default]
     Deterministic,
     /// The path tracer (the talk's way, and the referee), on the embedded
-    /// worker or the farm. The default until the solver's draft bake costs
-    /// less than the path tracer's.
-    #[default]
+    /// worker or the farm.
     MonteCarlo,
 }
 
