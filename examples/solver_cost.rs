@@ -2,9 +2,11 @@
 //! the daytime columns (every sun 0 to 88°), the spherical twilight
 //! columns (88 to 100°), and the diffuse light's table of one slice.
 //!
-//! cargo run --release --example solver_cost -- ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft]
+//! cargo run --release --example solver_cost -- ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft|full] [KEY=VALUE ...]
 //!
-//! `draft`: the twilight iteration's draft settings (`spherical::Settings::draft`).
+//! `draft`: the twilight iteration's draft settings (`spherical::Settings::draft`);
+//! KEY=VALUE: a setting of the iteration changed (stop_tau, levels=full|draft,
+//! modes, azimuths, cosines, tolerance).
 
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -17,7 +19,7 @@ use std::time::Instant;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        eprintln!("usage: solver_cost ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft]");
+        eprintln!("usage: solver_cost ATMOSPHERE [WAVELENGTH_NM] [STREAMS] [draft|full] [KEY=VALUE ...]");
         std::process::exit(2);
     };
     let atm = Atmosphere::load(std::path::Path::new(path)).unwrap_or_else(|e| {
@@ -56,13 +58,43 @@ fn main() {
     let grid = grid_for_suns(&layers, &twilight, step, 2.0);
     let n = grid.len();
     let t = Instant::now();
-    let settings =
+    let mut settings =
         if args.get(4).map(String::as_str) == Some("draft") { Settings::draft() } else { Settings::default() };
-    let (_, report) = solve(&layers, streams, grid, &settings);
+    for spec in args.iter().skip(5) {
+        let (key, value) = spec.split_once('=').unwrap_or_else(|| panic!("{spec}: want key=value"));
+        let number = || -> f64 { value.parse().unwrap_or_else(|_| panic!("{spec}: want a number")) };
+        match key {
+            "stop_tau" => settings.stop_tau = number(),
+            "levels" => {
+                settings.levels_km = if value == "full" { Settings::default() } else { Settings::draft() }.levels_km
+            }
+            "modes" => settings.modes = number() as usize,
+            "azimuths" => settings.azimuth_intervals = number() as usize,
+            "cosines" => settings.table_cosines = number() as usize,
+            "tolerance" => settings.tolerance = number(),
+            _ => panic!("{key}: stop_tau, levels=full|draft, modes, azimuths, cosines, tolerance"),
+        }
+    }
+    let (twilight_columns, report) = solve(&layers, streams, grid, &settings);
     println!(
         "twilight columns: {n}, {} passes ({:.3} s); moves {:?}",
         report.moves.len() + 1,
         t.elapsed().as_secs_f64(),
         report.moves
     );
+    // The answer, to compare settings: the ground's irradiance and the
+    // diffuse radiance at the zenith and 5.7° above the horizon toward and
+    // away from the sun, per unit solar irradiance.
+    for sun_deg in [90.0f64, 93.0, 96.0, 99.0] {
+        let sun = sun_deg.to_radians();
+        let zenith = twilight_columns.rays(sun, 1.0, &[0.0])[0];
+        let low = twilight_columns.rays(sun, 0.1, &[0.0, std::f64::consts::PI]);
+        println!(
+            "sun {sun_deg}: ground irradiance {:.5e}, zenith {:.5e}, low toward {:.5e} away {:.5e}",
+            twilight_columns.ground_irradiance_at(sun),
+            zenith,
+            low[0],
+            low[1]
+        );
+    }
 }

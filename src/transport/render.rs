@@ -21,6 +21,7 @@
 use super::layers::Grading;
 use super::light::{between_nodes, spectral_nodes, transpose, Solved, Wavelength, PIXEL_RAYS};
 use crate::atmosphere::Geometry;
+use crate::directions::Camera;
 use crate::render::medium::Spectral;
 use crate::render::single::{xyz_of, SingleScattering};
 use crate::render::{Image, PixelResult, Scene, View};
@@ -135,8 +136,16 @@ pub fn render(
     let parts = view.parts();
     let suns_rad: Vec<f64> = parts.iter().map(|(_, p)| sun_zenith_rad(p)).collect();
     let rays: Vec<Vec<(usize, f64, f64)>> = parts.iter().map(|(_, p)| rays_up(p)).collect();
-    let pixel_rays: Vec<Option<&[(usize, f64, f64)]>> =
-        rays.iter().map(|r| (r.len() <= PIXEL_RAYS).then_some(&r[..])).collect();
+    // A LUT slice always takes the tables: a bake's strip makes them for
+    // all its slices at once (`Columns::rays_for_suns`), cheaper there than
+    // each texel's own ray even for the demo's 8 x 32 cloudy slices (a
+    // cloudy draft's tables 9 s a wavelength against 14 s), and a slice is
+    // then the same bytes rendered alone or in a strip.
+    let pixel_rays: Vec<Option<&[(usize, f64, f64)]>> = parts
+        .iter()
+        .zip(&rays)
+        .map(|((_, p), r)| (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. })).then_some(&r[..]))
+        .collect();
     // Each wavelength solved once for the suns of every part (the slices
     // of a strip share their columns), then read for each part's pixels.
     let solve = |optics: &[Spectral], nodes: &[usize]| -> Vec<Vec<Wavelength>> {

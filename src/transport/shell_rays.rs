@@ -138,15 +138,25 @@ pub(super) fn through_layer_log(j_far: f64, j_near: f64, x: f64) -> f64 {
 
 /// Which interfaces the node rays stop at: the node levels, and others no
 /// closer than `base_km` + z `growth` above the last one kept (from the
-/// ground up).
-pub(super) fn stops(z: &[f64], levels: &[usize], (base_km, growth): (f64, f64)) -> Vec<bool> {
+/// ground up), nor more than `max_tau` of vertical optical depth (`tau[k]`
+/// of the layer between interfaces k and k + 1) above it.
+pub(super) fn stops(
+    z: &[f64],
+    tau: &[f64],
+    levels: &[usize],
+    (base_km, growth): (f64, f64),
+    max_tau: f64,
+) -> Vec<bool> {
     let mut keep = vec![false; z.len()];
     levels.iter().for_each(|&i| keep[i] = true);
-    let mut last = f64::NEG_INFINITY;
+    let (mut last, mut tau_since) = (f64::NEG_INFINITY, 0.0);
     for i in (0..z.len()).rev() {
-        if keep[i] || z[i] - last >= base_km + z[i] * growth {
+        if i < tau.len() {
+            tau_since += tau[i];
+        }
+        if keep[i] || z[i] - last >= base_km + z[i] * growth || tau_since > max_tau {
             keep[i] = true;
-            last = z[i];
+            (last, tau_since) = (z[i], 0.0);
         }
     }
     keep
@@ -192,7 +202,7 @@ impl Beam {
 
 #[cfg(test)]
 mod tests {
-    use super::through_layer_log;
+    use super::{stops, through_layer_log};
 
     /// ∫₀ˣ j_near (j_far / j_near)^{s/x} e^{−s} ds by the midpoint rule on
     /// 2 000 000 steps (relative error (k h)² / 24: 2e-8 for the steepest
@@ -212,6 +222,21 @@ mod tests {
     /// The closed form against the midpoint rule, from equal ends to ends
     /// 600 orders of magnitude apart (a beam in the Earth's shadow beside a
     /// sunlit one: the ratio of the ends overflows, which once made NaN).
+    /// The stops: every `base_km` + z `growth` up from the ground, the
+    /// node levels, and wherever the optical depth since the last stop
+    /// passes `max_tau` (a cloud's layers).
+    #[test]
+    fn the_rays_stop_in_clouds_every_max_tau() {
+        // Interfaces top down, 10 km to the ground 1 km apart; layer k is
+        // between z[k] and z[k + 1]: a cloud of 0.4 a layer from 6 to 3 km.
+        let z: Vec<f64> = (0..=10).rev().map(f64::from).collect();
+        let tau: Vec<f64> = (0..10).map(|k| if (4..7).contains(&k) { 0.4 } else { 0.01 }).collect();
+        let kept = |keep: Vec<bool>| -> Vec<f64> { (0..z.len()).filter(|&i| keep[i]).map(|i| z[i]).collect() };
+        assert_eq!(kept(stops(&z, &tau, &[0], (4.0, 0.0), f64::INFINITY)), [10.0, 8.0, 4.0, 0.0]);
+        assert_eq!(kept(stops(&z, &tau, &[0], (4.0, 0.0), 0.5)), [10.0, 6.0, 4.0, 0.0]);
+        assert_eq!(kept(stops(&z, &tau, &[0], (4.0, 0.0), 0.3)), [10.0, 6.0, 5.0, 4.0, 0.0]);
+    }
+
     #[test]
     fn a_source_exponential_along_the_path_integrates_to_its_quadrature() {
         for (j_far, j_near, x) in [
