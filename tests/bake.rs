@@ -1198,6 +1198,10 @@ fn lut_verify_reports_every_elevation() {
             assert!(x["sun_rel_y"].as_f64().is_some_and(|v| v < 0.01), "{x}");
             assert!(x["ambient_rel_y"].as_f64().is_some_and(f64::is_finite), "{x}");
         }
+        // The references by default: the transport solver's, no noise
+        // (none where the reference is black, the sun below these slabs).
+        let noise: Vec<f64> = e.iter().filter_map(|x| x["reference_median_rel_stderr_y"].as_f64()).collect();
+        assert!(!noise.is_empty() && noise.iter().all(|&n| n == 0.0), "{noise:?}");
         let q = s["quantisation_p99_rel"].as_f64().unwrap();
         assert!(q > 0.0 && q <= 1.0 / 64.0, "{q}");
         // The fog: every depth, view and sun between slices compared (3
@@ -1213,6 +1217,34 @@ fn lut_verify_reports_every_elevation() {
         assert!(fog["attenuation"]["median"].as_f64().unwrap() < 0.01, "{fog}");
     }
     assert!(plots.join("twilight_clear.png").exists());
+    // The path tracer's references on request, with their noise.
+    let o = sky(
+        &[
+            "lut",
+            "verify",
+            m.to_str().unwrap(),
+            "--bake",
+            bake.to_str().unwrap(),
+            "--reference",
+            "monte-carlo",
+            "--directions",
+            "10",
+            "--spp",
+            "4",
+            "--fog-spp",
+            "4",
+            "--json",
+        ],
+        tmp.path(),
+    );
+    let v = summary(&o);
+    let noise: Vec<f64> = v["skies"][0]["elevations"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|x| x["reference_median_rel_stderr_y"].as_f64())
+        .collect();
+    assert!(noise.iter().any(|&n| n > 0.0), "{noise:?}");
 }
 
 #[test]

@@ -71,13 +71,13 @@ enum PlanFormat {
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
-enum MethodArg {
+pub(super) enum MethodArg {
     Deterministic,
     MonteCarlo,
 }
 
 impl MethodArg {
-    fn method(self) -> bake::Method {
+    pub(super) fn method(self) -> bake::Method {
         match self {
             MethodArg::Deterministic => bake::Method::Deterministic,
             MethodArg::MonteCarlo => bake::Method::MonteCarlo,

@@ -27,7 +27,10 @@ pub struct VerifyArgs {
     /// Directions of the lattice above the horizon
     #[arg(long, default_value_t = 400)]
     directions: usize,
-    /// Samples per reference direction
+    /// How the references are rendered: deterministic (the transport solver at the bake's own resolution, for a bake of either method: no noise, so what remains is the LUTs' own error, mapping, interpolation and quantisation) or monte-carlo (the path tracer at --spp samples: the atmosphere's answer, with the solver's error and the references' noise in it)
+    #[arg(long, value_enum, default_value = "deterministic")]
+    reference: super::bake::MethodArg,
+    /// Samples per reference direction (--reference monte-carlo, and the twilight curves' references)
     #[arg(long, default_value_t = 256)]
     spp: u32,
     /// Samples per direction of the fog's references (15 directions x 30 renders per basis sky; fog near the camera is faint and its light scattered more than once is noisy)
@@ -53,18 +56,31 @@ pub fn run(a: VerifyArgs) -> Result<ExitCode> {
     let cache = cache_dir.is_dir().then(|| sky::bake::SliceCache::open(&cache_dir).ok()).flatten();
     let mie = sky::mie::MieCache::from_env();
     let cancel = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-    let opts = VerifyOptions { directions: a.directions, spp: a.spp, fog_spp: a.fog_spp, ..VerifyOptions::default() };
+    let opts = VerifyOptions {
+        directions: a.directions,
+        spp: a.spp,
+        fog_spp: a.fog_spp,
+        reference: a.reference.method(),
+        ..VerifyOptions::default()
+    };
+    let how = match opts.reference {
+        sky::bake::Method::Deterministic => "the transport solver at the bake's resolution".to_string(),
+        sky::bake::Method::MonteCarlo => format!("the path tracer, {} spp", a.spp),
+    };
     eprintln!(
-        "sky lut verify: rendering references ({} directions, {} spp) at 13 sun elevations per basis sky",
-        a.directions, a.spp
+        "sky lut verify: rendering references ({} directions, {how}) at 13 sun elevations per basis sky",
+        a.directions
     );
     let optics = sky::session::OpticsCache::default();
     let started = std::time::Instant::now();
+    // `elev` NaN: the solver's references of every elevation at once.
     let on_reference = |sky: &str, elev: f64| {
-        eprintln!(
-            "sky lut verify: {sky}: reference at sun elevation {elev:.2} deg (elapsed {:.0} s)",
-            started.elapsed().as_secs_f64()
-        )
+        let what = if elev.is_nan() {
+            "solving the references".to_string()
+        } else {
+            format!("reference at sun elevation {elev:.2} deg")
+        };
+        eprintln!("sky lut verify: {sky}: {what} (elapsed {:.0} s)", started.elapsed().as_secs_f64())
     };
     let report = match verify(&luts, &bake, cache.as_ref(), &opts, &optics, &mie, &on_reference, cancel.clone()) {
         Ok(r) => r,

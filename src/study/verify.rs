@@ -58,6 +58,10 @@ pub struct VerifyOptions {
     pub fog_spp: u32,
     /// Slice-centre elevations are taken from these slice indices.
     pub centre_slices: Vec<usize>,
+    /// How the sky's references are rendered: the transport solver at the
+    /// bake's resolution (`bake::solver::resolution`; all the elevations
+    /// of a basis sky at once) or the path tracer at `spp`.
+    pub reference: crate::bake::Method,
     pub workers: Vec<WorkerSpec>,
 }
 
@@ -68,6 +72,7 @@ impl Default for VerifyOptions {
             spp: 256,
             fog_spp: 4096,
             centre_slices: vec![10, 30, 44, 47, 52, 60],
+            reference: crate::bake::Method::Deterministic,
             workers: Vec::new(),
         }
     }
@@ -143,7 +148,8 @@ pub struct SkyVerification {
 /// Verifies every basis sky of `luts` that `bake` names (the bake file
 /// gives the atmospheres and the quality's spectral settings);
 /// `on_reference(sky, sun elevation)` is called before each reference
-/// render, for progress.
+/// render, for progress (the elevation NaN before the solver's references
+/// of a whole sky).
 #[allow(clippy::too_many_arguments)]
 pub fn verify(
     luts: &Luts,
@@ -180,17 +186,36 @@ pub fn verify(
         let elevs: Vec<f64> = elevations.iter().map(|e| e.0.max(0.0)).collect();
         let split = crate::study::interpolation::split(&model, entry, &elevs, &lattice);
         use crate::study::interpolation::SkyModel;
+        let views: Vec<View> = elevations
+            .iter()
+            .map(|&(elev, _)| View::directions(dirs.clone(), 90.0 - elev, sky.altitude_m, opts.spp, REFERENCE_SEED))
+            .collect();
+        let mut solved = match opts.reference {
+            crate::bake::Method::Deterministic => {
+                on_reference(&sky.name, f64::NAN);
+                let resolution = crate::bake::solver::resolution(quality, &sampling);
+                let images = crate::transport::render::render_views(&session.scene, &views, &resolution, &|| {})
+                    .map_err(|error| BakeError::Solver { sky: sky.name.clone(), error })?;
+                images.into_iter().map(Some).collect()
+            }
+            crate::bake::Method::MonteCarlo => vec![None; views.len()],
+        };
         let mut errors = Vec::new();
-        for ((elev, centre), (both, direction)) in elevations.into_iter().zip(split) {
-            on_reference(&sky.name, elev);
-            let view = View::directions(dirs.clone(), 90.0 - elev, sky.altitude_m, opts.spp, REFERENCE_SEED);
-            let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render {
-                sky: sky.name.clone(),
-                index: usize::MAX,
-                source,
-            })?;
+        for (k, ((elev, centre), (both, direction))) in elevations.into_iter().zip(split).enumerate() {
+            let image = match solved[k].take() {
+                Some(image) => image,
+                None => {
+                    on_reference(&sky.name, elev);
+                    let r = session.render_view(&views[k], cancel.clone()).map_err(|source| BakeError::Render {
+                        sky: sky.name.clone(),
+                        index: usize::MAX,
+                        source,
+                    })?;
+                    r.image
+                }
+            };
             let sun = direction_deg(90.0 - elev, 0.0);
-            let reference: Vec<[f64; 3]> = r.image.pixels.iter().map(|p| p.xyz).collect();
+            let reference: Vec<[f64; 3]> = image.pixels.iter().map(|p| p.xyz).collect();
             let decoded: Vec<[f64; 3]> =
                 dirs.iter().map(|&(z, a)| luts.sample_xyz_of(entry, texture, elev, direction_deg(z, a))).collect();
             let white_y = {
@@ -219,7 +244,7 @@ pub fn verify(
             let sun_rel_y = sun_error(luts, entry, &session, sky.altitude_m, elev);
             let ambient_rel_y = ambient_error(luts, entry, &dirs, &reference, elev);
             let mut ref_rel: Vec<f64> =
-                r.image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
+                image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
             errors.push(ElevationError {
                 sun_elevation_deg: elev,
                 slice_centre: centre,

@@ -131,11 +131,25 @@ pub fn render(
     resolution: &Resolution,
     on_wavelength: &(dyn Fn() + Sync),
 ) -> Result<Image, Unsupported> {
-    check(view)?;
-    let (width, height) = (view.width, view.height);
-    let parts = view.parts();
-    let suns_rad: Vec<f64> = parts.iter().map(|(_, p)| sun_zenith_rad(p)).collect();
-    let rays: Vec<Vec<(usize, f64, f64)>> = parts.iter().map(|(_, p)| rays_up(p)).collect();
+    Ok(render_views(scene, std::slice::from_ref(view), resolution, on_wavelength)?.remove(0))
+}
+
+/// `render` for several views at once (`sky lut verify`'s references at
+/// its sun elevations): each wavelength solved once for the suns of all
+/// of them. Each image is the one `render` gives its view alone, bit for
+/// bit.
+pub fn render_views(
+    scene: &Scene,
+    views: &[View],
+    resolution: &Resolution,
+    on_wavelength: &(dyn Fn() + Sync),
+) -> Result<Vec<Image>, Unsupported> {
+    views.iter().try_for_each(check)?;
+    // (view, first column, part) of every part of every view.
+    let parts: Vec<(usize, usize, View)> =
+        views.iter().enumerate().flat_map(|(v, view)| view.parts().into_iter().map(move |(x, p)| (v, x, p))).collect();
+    let suns_rad: Vec<f64> = parts.iter().map(|(_, _, p)| sun_zenith_rad(p)).collect();
+    let rays: Vec<Vec<(usize, f64, f64)>> = parts.iter().map(|(_, _, p)| rays_up(p)).collect();
     // A LUT slice always takes the tables: a bake's strip makes them for
     // all its slices at once (`Columns::rays_for_suns`), cheaper there than
     // each texel's own ray even for the demo's 8 x 32 cloudy slices (a
@@ -144,7 +158,7 @@ pub fn render(
     let pixel_rays: Vec<Option<&[(usize, f64, f64)]>> = parts
         .iter()
         .zip(&rays)
-        .map(|((_, p), r)| (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. })).then_some(&r[..]))
+        .map(|((_, _, p), r)| (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. })).then_some(&r[..]))
         .collect();
     // Each wavelength solved once for the suns of every part (the slices
     // of a strip share their columns), then read for each part's pixels.
@@ -162,16 +176,24 @@ pub fn render(
     let band_nodes = spectral_nodes(&scene.band_optics, resolution.ms_step_nm);
     let every_line: Vec<usize> = (0..scene.line_optics.len()).collect();
     let (bands, lines) = (solve(&scene.band_optics, &band_nodes), solve(&scene.line_optics, &every_line));
-    let mut pixels = vec![None; width * height];
-    for (((first, part), bands), lines) in parts.iter().zip(bands).zip(lines) {
+    let mut pixels: Vec<Vec<Option<PixelResult>>> = views.iter().map(|v| vec![None; v.width * v.height]).collect();
+    for (((v, first, part), bands), lines) in parts.iter().zip(bands).zip(lines) {
         let part_pixels = render_part(scene, part, &bands, &lines);
         for (i, p) in part_pixels.into_iter().enumerate() {
             let (x, y) = (first + i % part.width, i / part.width);
-            pixels[y * width + x] = Some(p);
+            pixels[*v][y * views[*v].width + x] = Some(p);
         }
     }
-    let pixels = pixels.into_iter().map(|p| p.expect("the parts cover the view")).collect();
-    Ok(Image { width, height, pixels })
+    let images = views
+        .iter()
+        .zip(pixels)
+        .map(|(view, pixels)| Image {
+            width: view.width,
+            height: view.height,
+            pixels: pixels.into_iter().map(|p| p.expect("the parts cover the view")).collect(),
+        })
+        .collect();
+    Ok(images)
 }
 
 /// The sun's zenith angle over the observer of `view`, radians.
@@ -323,8 +345,8 @@ mod tests {
         };
         let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
         let suns_deg = [30.0, 89.0, 95.0];
-        // Slices of more pixels looking up than `PIXEL_RAYS`: the tables'
-        // rays are shared among the suns (`Columns::rays_for_suns`).
+        // LUT slices take the tables, whose rays the suns share
+        // (`Columns::rays_for_suns`).
         const W: usize = 20;
         const H: usize = 30;
         let slice = |sun_deg: f64| {
@@ -340,7 +362,6 @@ mod tests {
             sun_azimuth_deg: 0.0,
         };
         strip.width = W * suns_deg.len();
-        assert!(suns_deg.iter().all(|&z| rays_up(&slice(z)).len() > PIXEL_RAYS), "the tables' path");
         for ms_step_nm in [0.0, 250.0] {
             let resolution =
                 Resolution { streams: 4, column_step_deg: 3.0, ms_step_nm, view_grid: (16, 8), ..Default::default() };
@@ -353,6 +374,38 @@ mod tests {
                     assert!(p.xyz[1] > 0.0, "sun {sun}, texel {i}: {:?}", p.xyz);
                 }
             }
+        }
+    }
+
+    /// `render_views` (`sky lut verify`'s references) solves once for the
+    /// suns of several views, each few enough pixels to take its own rays:
+    /// each image is the view rendered alone.
+    #[test]
+    fn views_rendered_together_are_each_as_rendered_alone() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
+        let atm = Atmosphere::load(&path).unwrap();
+        let spectral = crate::render::SpectralSettings {
+            band_nm: 100.0,
+            wavelength_sampling: crate::render::WavelengthSampling::Hero,
+            spectral_nm: vec![],
+            xyz: true,
+        };
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
+        let dirs = vec![(10.0, 0.0), (60.0, 90.0), (85.0, 180.0)];
+        let views: Vec<View> = [30.0, 95.0].iter().map(|&sun| View::directions(dirs.clone(), sun, 0.0, 1, 1)).collect();
+        let resolution = Resolution {
+            streams: 4,
+            column_step_deg: 3.0,
+            ms_step_nm: 250.0,
+            view_grid: (16, 8),
+            ..Default::default()
+        };
+        let together = render_views(&scene, &views, &resolution, &|| {}).unwrap();
+        for (view, image) in views.iter().zip(&together) {
+            let alone = render(&scene, view, &resolution, &|| {}).unwrap();
+            let xyz = |i: &Image| i.pixels.iter().map(|p| p.xyz).collect::<Vec<_>>();
+            assert_eq!(xyz(&alone), xyz(image), "sun {}", view.sun_zenith_deg);
+            assert!(image.pixels.iter().all(|p| p.xyz[1] > 0.0), "sun {}", view.sun_zenith_deg);
         }
     }
 }
