@@ -6,7 +6,7 @@
 //!
 //! `draft`: the twilight iteration's draft settings (`spherical::Settings::draft`);
 //! KEY=VALUE: a setting of the iteration changed (stop_tau, levels=full|draft,
-//! modes, azimuths, cosines, tolerance).
+//! modes, azimuths, cosines, tolerance, passes).
 
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -72,7 +72,8 @@ fn main() {
             "azimuths" => settings.azimuth_intervals = number() as usize,
             "cosines" => settings.table_cosines = number() as usize,
             "tolerance" => settings.tolerance = number(),
-            _ => panic!("{key}: stop_tau, levels=full|draft, modes, azimuths, cosines, tolerance"),
+            "passes" => settings.max_passes = number() as usize,
+            _ => panic!("{key}: stop_tau, levels=full|draft, modes, azimuths, cosines, tolerance, passes"),
         }
     }
     let (twilight_columns, report) = solve(&layers, streams, grid, &settings);

@@ -153,9 +153,8 @@ const THICK_PER_KM: f64 = 1.0;
 /// ground, and the edges of every optically thick stretch (`sigma[k]`: the
 /// scaled extinction per km of layer k, between interfaces k and k + 1).
 /// The correction is linear in altitude between node levels: across a
-/// cloud's top it would spread what the bright top scatters into the air
-/// above (cloudy5 with nodes at 4 and 8 km only: the ground's irradiance
-/// at sun zenith 99° 5 times too bright).
+/// cloud's top it would spread the bright top's source into the air above
+/// and the dark interior's into the top.
 fn node_levels(z: &[f64], sigma: &[f64], targets_km: &[f64]) -> Vec<usize> {
     let thick = |k: usize| sigma.get(k).is_some_and(|&s| s > THICK_PER_KM);
     let edges = (1..z.len().saturating_sub(1)).filter(|&i| thick(i - 1) != thick(i));
