@@ -20,6 +20,13 @@ fn sky(args: &[&str], dir: &Path) -> Output {
         .unwrap()
 }
 
+/// `sky bake-luts --method monte-carlo ARGS`: the path tracer's bake, which
+/// most of these tests check (the solver's default has its own tests).
+fn traced_bake(args: &[&str], dir: &Path) -> Output {
+    let all: Vec<&str> = ["bake-luts", "--method", "monte-carlo"].iter().chain(args).copied().collect();
+    sky(&all, dir)
+}
+
 /// A bake run with `--json-progress`: it succeeds, and these are its events.
 fn bake_events(args: &[&str], dir: &Path) -> Vec<serde_json::Value> {
     let o = sky(args, dir);
@@ -234,18 +241,7 @@ fn a_bake_carries_the_fog_luts() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake_path = root().join("tests/bakes/tiny.toml");
-    summary(&sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake_path.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--json",
-        ],
-        tmp.path(),
-    ));
+    summary(&traced_bake(&[bake_path.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     let f = luts.manifest.fog.as_ref().expect("a fog entry");
     assert_eq!((f.vk_format, f.width, f.height, f.layers, f.ceiling_km), (97, 8, 8, 2 * 2 * 64, 3.0));
@@ -356,18 +352,7 @@ fn a_draft_forecasts_its_cost_from_probes() {
     let tmp = tempfile::tempdir().unwrap();
     let out = tmp.path().join("luts");
     let bake = root().join("tests/bakes/tiny.toml");
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--json-progress",
-        ],
-        tmp.path(),
-    );
+    let o = traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json-progress"], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let events: Vec<serde_json::Value> =
         String::from_utf8_lossy(&o.stdout).lines().filter_map(|l| serde_json::from_str(l).ok()).collect();
@@ -434,18 +419,8 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
     let text =
         format!("[quality.final]\nband_nm = 40.0\nspp = 48\nmax_rel_error = 0.2\n\n[[sky]]\nname = \"clear\"\natmosphere = {atmosphere:?}\nwidth = 4\nheight = 16\n\n[fog]\nwidth = 8\nheight = 8\n");
     std::fs::write(&bake, text).unwrap();
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--quality",
-            "final",
-            "--json-progress",
-        ],
+    let o = traced_bake(
+        &[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--quality", "final", "--json-progress"],
         tmp.path(),
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -483,11 +458,8 @@ fn an_adaptive_bake_forecasts_its_sky_and_fog_from_pilots() {
                 std::fs::remove_file(f.path()).unwrap();
             }
         }
-        let o = sky(
+        let o = traced_bake(
             &[
-                "bake-luts",
-                "--method",
-                "monte-carlo",
                 bake.to_str().unwrap(),
                 "--out",
                 out.to_str().unwrap(),
@@ -691,10 +663,7 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let first = tmp.path().join("first");
-    let o = sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", first.to_str().unwrap()],
-        tmp.path(),
-    );
+    let o = traced_bake(&[bake.to_str().unwrap(), "--out", first.to_str().unwrap()], tmp.path());
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let cache = sky::bake::SliceCache::open(&first.join("cache")).unwrap();
     // A sky's slice (4 wide), not a fog slice (8 x 8: the same cache).
@@ -710,18 +679,8 @@ fn a_texel_that_is_not_finite_is_a_located_bake_error() {
     cache.put(&key, &slice).unwrap();
     let second = tmp.path().join("second");
     let cache_dir = first.join("cache");
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            second.to_str().unwrap(),
-            "--cache",
-            cache_dir.to_str().unwrap(),
-            "--json",
-        ],
+    let o = traced_bake(
+        &[bake.to_str().unwrap(), "--out", second.to_str().unwrap(), "--cache", cache_dir.to_str().unwrap(), "--json"],
         tmp.path(),
     );
     assert_eq!(o.status.code(), Some(1));
@@ -757,10 +716,7 @@ fn a_bake_carries_the_suns_transmittance_and_sunlight() {
     let atm_path = root().join("atmospheres/clear.toml");
     std::fs::write(&bake, format!("[quality.draft]\nband_nm = 20.0\nspp = 1\n\n[[sky]]\nname = \"clear\"\natmosphere = {:?}\nwidth = 4\nheight = 16\n", atm_path.to_str().unwrap())).unwrap();
     let out = tmp.path().join("luts");
-    summary(&sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
-        tmp.path(),
-    ));
+    summary(&traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     let t = luts.manifest.transmittance.as_ref().expect("a transmittance entry");
     assert_eq!((t.vk_format, t.width, t.height, t.layers.clone()), (97, 256, 64, vec!["clear".to_string()]));
@@ -974,10 +930,8 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     let done = files(&cache, "slice").len();
     assert!(done == 0 || done == 63, "{done} slices cached when the bake was killed: a sky's are cached together");
     assert!(!out.join("manifest.json").exists());
-    let resumed = summary(&sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
-        tmp.path(),
-    ));
+    let resumed =
+        summary(&traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let total: u64 = rendered(&resumed).iter().map(|r| r.1).sum();
     // 126 distinct views: slices 47 and 48 of each sky share one.
     assert_eq!(total, 126 - done as u64, "{resumed}");
@@ -988,10 +942,7 @@ fn a_killed_bake_resumes_where_it_stopped_and_bakes_the_same_bytes() {
     assert!(files(&cache, "journal").is_empty());
     // The same bytes as a bake that was never interrupted.
     let fresh = tmp.path().join("fresh");
-    summary(&sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"],
-        tmp.path(),
-    ));
+    summary(&traced_bake(&[bake.to_str().unwrap(), "--out", fresh.to_str().unwrap(), "--json"], tmp.path()));
     for f in ["clear.ktx2", "hazed.ktx2", "transmittance.ktx2"] {
         assert!(
             std::fs::read(out.join(f)).unwrap() == std::fs::read(fresh.join(f)).unwrap(),
@@ -1016,10 +967,8 @@ fn ctrl_c_stops_a_bake_that_then_resumes() {
     assert_eq!(o.status.code(), Some(130), "{err}");
     assert!(err.contains("cancelled; nothing was packed") && err.contains("the same command resumes"), "{err}");
     assert!(!out.join("manifest.json").exists());
-    let resumed = summary(&sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
-        tmp.path(),
-    ));
+    let resumed =
+        summary(&traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let columns_resumed: u64 =
         resumed["skies"].as_array().unwrap().iter().map(|k| k["columns_resumed"].as_u64().unwrap()).sum();
     assert!(columns_resumed > 0, "{resumed}");
@@ -1031,18 +980,8 @@ fn a_slice_goes_only_into_the_cache() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("luts");
-    let s = summary(&sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--slice",
-            "clear:5,hazed:63,clear:fog:5",
-            "--json",
-        ],
+    let s = summary(&traced_bake(
+        &[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:5,hazed:63,clear:fog:5", "--json"],
         tmp.path(),
     ));
     // The fog slice counts, with its cost, in the summary.
@@ -1057,38 +996,14 @@ fn a_slice_goes_only_into_the_cache() {
     assert!(fog["core_seconds"].as_f64().unwrap() > 0.0 && fog["texels"] == 64, "{fog}");
     assert_eq!(std::fs::read_dir(out.join("cache")).unwrap().count(), 3);
     assert!(!out.join("manifest.json").exists());
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--slice",
-            "cloudy3:1",
-        ],
-        tmp.path(),
-    );
+    let o = traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "cloudy3:1"], tmp.path());
     assert_eq!(o.status.code(), Some(1));
     assert!(
         String::from_utf8_lossy(&o.stderr).contains("--slice cloudy3:1: no such basis sky or slice"),
         "{}",
         String::from_utf8_lossy(&o.stderr)
     );
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bake.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--slice",
-            "clear:64",
-        ],
-        tmp.path(),
-    );
+    let o = traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--slice", "clear:64"], tmp.path());
     assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
 }
 
@@ -1098,17 +1013,7 @@ fn bad_bake_files_are_located_errors() {
     let bad = tmp.path().join("bad.toml");
     std::fs::write(&bad, "[[sky]]\nname = \"clear\"\natmosphere = \"missing.toml\"\nwidth = 32\nheight = 128\n")
         .unwrap();
-    let o = sky(
-        &[
-            "bake-luts",
-            "--method",
-            "monte-carlo",
-            bad.to_str().unwrap(),
-            "--out",
-            tmp.path().join("o").to_str().unwrap(),
-        ],
-        tmp.path(),
-    );
+    let o = traced_bake(&[bad.to_str().unwrap(), "--out", tmp.path().join("o").to_str().unwrap()], tmp.path());
     assert_eq!(o.status.code(), Some(1));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.toml:3: sky \"clear\": atmosphere file") && err.contains("not found"), "{err}");
@@ -1147,10 +1052,7 @@ fn lut_verify_reports_every_elevation() {
     let tmp = tempfile::tempdir().unwrap();
     let bake = root().join("tests/bakes/tiny.toml");
     let out = tmp.path().join("luts");
-    summary(&sky(
-        &["bake-luts", "--method", "monte-carlo", bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"],
-        tmp.path(),
-    ));
+    summary(&traced_bake(&[bake.to_str().unwrap(), "--out", out.to_str().unwrap(), "--json"], tmp.path()));
     let m = out.join("manifest.json");
     let plots = tmp.path().join("plots");
     let o = sky(
