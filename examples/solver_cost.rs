@@ -6,7 +6,8 @@
 //!
 //! `draft`: the twilight iteration's draft settings (`spherical::Settings::draft`);
 //! KEY=VALUE: a setting of the iteration changed (stop_tau, levels=full|draft,
-//! modes, azimuths, cosines, tolerance, passes).
+//! modes, azimuths, cosines, tolerance, passes, accelerate=0|1,
+//! spacing=KM: the stops' spacing, KM + KM/4 times the altitude; 0: every interface).
 
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -73,13 +74,17 @@ fn main() {
             "cosines" => settings.table_cosines = number() as usize,
             "tolerance" => settings.tolerance = number(),
             "passes" => settings.max_passes = number() as usize,
-            _ => panic!("{key}: stop_tau, levels=full|draft, modes, azimuths, cosines, tolerance, passes"),
+            "accelerate" => settings.accelerate = number() != 0.0,
+            "spacing" => settings.stop_spacing = (number(), settings.stop_spacing.1 * number() / 0.5),
+            _ => panic!(
+                "{key}: stop_tau, levels=full|draft, modes, azimuths, cosines, tolerance, passes, accelerate, spacing"
+            ),
         }
     }
     let (twilight_columns, report) = solve(&layers, streams, grid, &settings);
     println!(
         "twilight columns: {n}, {} passes ({:.3} s); moves {:?}",
-        report.moves.len() + 1,
+        report.moves.len(),
         t.elapsed().as_secs_f64(),
         report.moves
     );

@@ -70,7 +70,7 @@ fn main() {
         let zenith = grid_reaches(l, sun, step_deg.to_radians(), 2.0);
         let (columns, report) = solve(l, *n, zenith, settings);
         let seconds = t0.elapsed().as_secs_f64();
-        let passes = report.moves.len() + 1;
+        let passes = report.moves.len();
         eprintln!("{name}: {seconds:.1} s, {passes} passes, last move {:.1e}", report.moves.last().unwrap_or(&0.0));
         answers.push(mus.iter().flat_map(|&mu| columns.rays(sun, mu, &phis)).collect());
     }

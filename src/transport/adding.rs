@@ -266,6 +266,10 @@ pub(super) fn cosine_at(radius: Option<f64>, u: f64, z: f64) -> f64 {
     }
 }
 
+/// The diffuse radiance down (`.0`) and up (`.1`) the streams at each
+/// interface, top down.
+pub(super) type Fields = (Vec<Vec<f64>>, Vec<Vec<f64>>);
+
 /// The sun-independent part of one mode's adding: the layers' matrices,
 /// the reflections of everything below (`rg`) and above (`rs`) each
 /// interface, and the factorised systems the adding solves (module
@@ -322,23 +326,41 @@ impl ModeMatrices {
     /// The diffuse radiance down (`.0`) and up (`.1`) the streams at each
     /// interface, top down, for a sun of cosine `mu0` (negative: below the
     /// local horizon) whose beam reaches the interfaces as `paths` says.
-    pub(super) fn fields(&self, s: &Streams, albedo: f64, mu0: f64, paths: &Paths) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+    pub(super) fn fields(&self, s: &Streams, albedo: f64, mu0: f64, paths: &Paths) -> Fields {
         let (n, nl) = (s.n(), self.ops.len());
         let beam = &paths.beam;
         let src: Vec<(Vec<f64>, Vec<f64>)> =
             self.ops.iter().zip(&paths.secant).map(|(op, &sec)| op.sources(s, mu0, sec)).collect();
+        let ground = if self.lambertian { vec![albedo * mu0.max(0.0) * beam[nl] / PI; n] } else { vec![0.0; n] };
+        self.fields_of(&src, beam, ground)
+    }
+
+    /// The diffuse radiance down and up the streams at each interface when
+    /// a source J (`sources[k]`: J along the downward streams, then the
+    /// upward), the same at every depth of layer k, adds to each layer's
+    /// radiance equation; nothing enters at the top and the ground emits
+    /// nothing of its own.
+    pub(super) fn fields_of_uniform(&self, s: &Streams, sources: &[(Vec<f64>, Vec<f64>)]) -> Fields {
+        let src: Vec<(Vec<f64>, Vec<f64>)> =
+            self.ops.iter().zip(sources).map(|(op, (down, up))| op.uniform_sources(s, down, up)).collect();
+        self.fields_of(&src, &vec![1.0; src.len()], vec![0.0; s.n()])
+    }
+
+    /// The adding of the layers' diffuse sources (what layer k sends down
+    /// out of its base and up out of its top: `scale[k]` times `src[k]`)
+    /// and the radiance `ground` the ground sends up of its own.
+    fn fields_of(&self, src: &[(Vec<f64>, Vec<f64>)], scale: &[f64], ground: Vec<f64>) -> Fields {
+        let (n, nl) = (ground.len(), self.ops.len());
         // From the ground up: the radiance Û_k everything below sends up.
         let mut ug = vec![vec![0.0; n]; nl + 1];
-        if self.lambertian {
-            ug[nl] = vec![albedo * mu0.max(0.0) * beam[nl] / PI; n];
-        }
+        ug[nl] = ground;
         for k in (0..nl).rev() {
             let op = &self.ops[k];
             let below = self.rg[k + 1].mul_vec(&src[k].0);
-            let into: Vec<f64> = below.iter().zip(&ug[k + 1]).map(|(a, b)| beam[k] * a + b).collect();
+            let into: Vec<f64> = below.iter().zip(&ug[k + 1]).map(|(a, b)| scale[k] * a + b).collect();
             let up_into = self.below[k].solve_vec(&into);
             let t_up = op.t.mul_vec(&up_into);
-            ug[k] = t_up.iter().zip(&src[k].1).map(|(a, b)| a + beam[k] * b).collect();
+            ug[k] = t_up.iter().zip(&src[k].1).map(|(a, b)| a + scale[k] * b).collect();
         }
         // From the top down, and the fields at each interface.
         let mut ds = vec![0.0; n];
@@ -349,9 +371,9 @@ impl ModeMatrices {
                 let (op, (s_down, s_up)) = (&self.ops[k - 1], &src[k - 1]);
                 let rsu = self.rs[k - 1].mul_vec(s_up);
                 let into = self.above[k - 1]
-                    .solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + beam[k - 1] * r).collect::<Vec<_>>());
+                    .solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + scale[k - 1] * r).collect::<Vec<_>>());
                 let t_into = op.t.mul_vec(&into);
-                ds = t_into.iter().zip(s_down).map(|(a, b)| a + beam[k - 1] * b).collect();
+                ds = t_into.iter().zip(s_down).map(|(a, b)| a + scale[k - 1] * b).collect();
             }
             let rsu = self.rs[k].mul_vec(&ug[k]);
             down[k] = self.between[k].solve_vec(&ds.iter().zip(&rsu).map(|(d, r)| d + r).collect::<Vec<_>>());

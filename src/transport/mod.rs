@@ -17,6 +17,7 @@
 //! into a view's pixels for `sky render --method deterministic`.
 //! `legendre` and `linalg` are their arithmetic.
 
+mod accelerate;
 pub mod adding;
 pub mod columns;
 pub mod layers;

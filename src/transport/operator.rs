@@ -174,9 +174,28 @@ impl LayerMatrices {
         let e_mean = 0.5 * (1.0 + (-delta * secant).exp());
         let qd: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&self.plus, i) / s.mu[i]).collect();
         let qu: Vec<f64> = (0..n).map(|i| delta * e_mean * q(&self.minus, i) / s.mu[i]).collect();
+        self.build_sources(&qd, &qu, secant)
+    }
+
+    /// The diffuse radiance the layer sends down out of its base and up out
+    /// of its top when a source J, the same at every depth of it, adds to
+    /// its radiance equation (u dI/dτ = −I + scattering + J): `down[i]` is
+    /// J along the downward stream i, `up[i]` along the upward one.
+    pub fn uniform_sources(&self, s: &Streams, down: &[f64], up: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        let delta = self.delta;
+        let qd: Vec<f64> = down.iter().zip(&s.mu).map(|(j, u)| delta * j / u).collect();
+        let qu: Vec<f64> = up.iter().zip(&s.mu).map(|(j, u)| delta * j / u).collect();
+        self.build_sources(&qd, &qu, 0.0)
+    }
+
+    /// The diamond start's sources `qd`, `qu` (per stream, times δ/μ) of
+    /// the thin sub-layer, doubled to the whole layer, the lower copy's
+    /// weakened by e^{−secant t} across the upper's t.
+    fn build_sources(&self, qd: &[f64], qu: &[f64], secant: f64) -> (Vec<f64>, Vec<f64>) {
+        let delta = self.delta;
         let (p1, p2) = &self.start;
-        let sum = p1.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d + u).collect::<Vec<_>>());
-        let diff = p2.solve_vec(&qd.iter().zip(&qu).map(|(d, u)| d - u).collect::<Vec<_>>());
+        let sum = p1.solve_vec(&qd.iter().zip(qu).map(|(d, u)| d + u).collect::<Vec<_>>());
+        let diff = p2.solve_vec(&qd.iter().zip(qu).map(|(d, u)| d - u).collect::<Vec<_>>());
         let mut down: Vec<f64> = sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a + b)).collect();
         let mut up: Vec<f64> = sum.iter().zip(&diff).map(|(a, b)| 0.5 * (a - b)).collect();
         let mut thickness = delta;

@@ -22,10 +22,10 @@
 //! is exact for the delta-M scaled medium, and the multiply scattered
 //! light's source J is read from the columns at θ_s (linear in log J between
 //! the two nearest). J₁ is integrated layer by layer, exponential in
-//! optical path across each as the beam is (`through_layer_log`); J only
-//! between the ray's stops (`stops`: every interface near the ground,
-//! sparser above), linear in the optical path summed over the layers
-//! between. (J₁ needs every layer: it changes by orders of magnitude across
+//! optical path across each as the beam is (`through_layer_log`); J
+//! between the ray's stops (`stops`: by default every interface; a draft's
+//! every interface near the ground, sparser above), linear in the optical
+//! path summed over the layers between. (J₁ needs every layer: it changes by orders of magnitude across
 //! the Earth's shadow; with it on the stops too, the zenith at sun 96° came
 //! out 8 % bright, now 0.6 %, against every interface for both.) The node
 //! radiances are turned into Fourier modes of azimuth (trapezoid rule on
@@ -34,14 +34,24 @@
 //! levels, linear in altitude between them, corrects the columns' sources
 //! at every interface, and the ground's irradiance follows from the new
 //! downward radiance at the ground. Repeated until the sources stop
-//! moving: each pass carries the light one more scattering sideways.
+//! moving: each pass carries the light one more scattering sideways. In
+//! and under thick clouds a pass moves the answer only a little of the
+//! way (light diffuses through a cloud over tens of scatterings): after
+//! each pass the columns' own plane-parallel solution of its change's
+//! further scattering is added (`accelerate`, synthetic acceleration),
+//! which leaves the fixed point where it is and reaches it in a few passes
+//! (cloudy5 at 550 nm, draft: the largest move 3e-4 after 12 passes, 8e-8
+//! after 35; without, 4e-4 after 60 passes and still 0.97 of the last at
+//! each).
 //!
 //! Modes of azimuth above `Settings::modes` keep the columns' values.
 
+use super::accelerate::Accelerator;
 use super::adding::{source_coefficients, through_layer, Scaled};
 use super::columns::{bracket, interfaces_km, log_lerp, Columns, Solution};
 use super::layers::Layers;
 use super::legendre::{legendre_all, normalised_associated};
+use super::operator::Streams;
 use super::shell_rays::{stops, through_layer_log, trace, At, Beam, Ray};
 use rayon::prelude::*;
 use std::f64::consts::PI;
@@ -69,6 +79,9 @@ pub struct Settings {
     /// apart: the source is linear in optical path between stops, which a
     /// cloud's is not over more than a fraction of one.
     pub stop_tau: f64,
+    /// Whether each pass is followed by the columns' own solution of the
+    /// correction's further scattering (`Accelerator`).
+    pub accelerate: bool,
 }
 
 impl Default for Settings {
@@ -83,8 +96,9 @@ impl Default for Settings {
             table_cosines: 129,
             tolerance: 1e-3,
             max_passes: 12,
-            stop_spacing: (0.5, 0.125),
+            stop_spacing: (0.0, 0.0),
             stop_tau: 0.1,
+            accelerate: true,
         }
     }
 }
@@ -92,8 +106,13 @@ impl Default for Settings {
 impl Settings {
     /// Coarser settings for a draft bake: every other node level, Fourier
     /// modes up to 4 on 8 intervals of azimuth, half the table's cosines,
-    /// stops every 0.25 of optical depth in clouds, and a stopping
-    /// tolerance of 3e-3. What it costs in the answer is
+    /// stops 0.5 km + 1/8 of the altitude apart (every 0.25 of optical depth
+    /// in clouds), and a stopping tolerance of 3e-3. (The sparse stops
+    /// alone, 16 streams, cloudy5 at 550 nm, against every interface:
+    /// ground irradiance +1.4, +0.8, +1.0 and +2.7 % at sun 90, 93, 96 and
+    /// 99°, for 0.68 times the twilight's time; in the tau-60 slab the
+    /// iteration's fixed point 6e-3 off the exact columns, 2e-4 with every
+    /// interface.) What it costs in the answer is
     /// measured against the defaults by `examples/draft_error`
     /// (`bake::solver::resolution`).
     pub fn draft() -> Settings {
@@ -104,6 +123,7 @@ impl Settings {
             azimuth_intervals: 8,
             table_cosines: 65,
             tolerance: 3e-3,
+            stop_spacing: (0.5, 0.125),
             stop_tau: 0.25,
             ..full
         }
@@ -428,6 +448,34 @@ fn largest_move(at_levels: &Coefficients, previous: &Coefficients) -> f64 {
     largest
 }
 
+/// The source's coefficients of the node radiances `new` (per column),
+/// modes below `modes`.
+fn node_coefficients(s: &Streams, new: &[NodeModes], modes: usize) -> Coefficients {
+    new.iter()
+        .map(|levels_of_c| {
+            (0..modes)
+                .map(|m| {
+                    levels_of_c
+                        .iter()
+                        .map(|modes_of_level| {
+                            let (d, u) = &modes_of_level[m];
+                            source_coefficients(s, m, std::slice::from_ref(d), std::slice::from_ref(u)).remove(0)
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// The coefficients `a` (`[c][m][interface]`) of modes below `modes` at
+/// the node `levels`.
+fn at_node_levels(a: &Coefficients, levels: &[usize], modes: usize) -> Coefficients {
+    a.iter()
+        .map(|column| column[..modes].iter().map(|m| levels.iter().map(|&i| m[i].clone()).collect()).collect())
+        .collect()
+}
+
 /// The coefficients `pp` corrected by the difference of `at_levels` from
 /// them at the node `levels`, linear in altitude between.
 fn correct(a: &mut Coefficients, pp: &Coefficients, at_levels: &Coefficients, levels: &[usize], z: &[f64]) {
@@ -481,7 +529,8 @@ pub(super) fn iterate(layers: &Layers, solution: &mut Solution, zenith_rad: &[f6
     let pp: Coefficients = solution.a.clone();
     let direct = solution.ground_direct.clone();
     let mut diffuse: Vec<f64> = solution.ground_irradiance.iter().zip(&direct).map(|(g, d)| g - d).collect();
-    let mut previous: Option<Coefficients> = None;
+    let accelerator =
+        if settings.accelerate { Accelerator::new(s, scaled, layers.ground_albedo, &levels, &z) } else { None };
     for _pass in 0..settings.max_passes {
         let table = Table::new(solution, modes, settings.table_cosines.max(3));
         let pass = Pass {
@@ -495,33 +544,33 @@ pub(super) fn iterate(layers: &Layers, solution: &mut Solution, zenith_rad: &[f6
         };
         let new: Vec<NodeModes> =
             (0..zenith_rad.len()).into_par_iter().map(|c| pass.node_modes(c, &rays, &dirs, &phis, modes)).collect();
-        // The new coefficients at the node levels.
-        let at_levels: Coefficients = new
-            .iter()
-            .map(|levels_of_c| {
-                (0..modes)
-                    .map(|m| {
-                        levels_of_c
-                            .iter()
-                            .map(|modes_of_level| {
-                                let (d, u) = &modes_of_level[m];
-                                source_coefficients(s, m, std::slice::from_ref(d), std::slice::from_ref(u)).remove(0)
-                            })
-                            .collect()
-                    })
-                    .collect()
-            })
-            .collect();
-        correct(&mut solution.a, &pp, &at_levels, &levels, &z);
+        let mut at_levels = node_coefficients(s, &new, modes);
+        let read: Coefficients = at_node_levels(&solution.a, &levels, modes);
+        let moved = largest_move(&at_levels, &read);
         for (c, modes_of_c) in new.iter().enumerate() {
             let ground = &modes_of_c[levels.len() - 1][0].0;
             diffuse[c] = 2.0 * PI * (0..s.n()).map(|j| s.w[j] * s.mu[j] * ground[j]).sum::<f64>();
+        }
+        if let Some(accelerator) = &accelerator {
+            // The rest of the way, as the columns would scatter this
+            // pass's change further.
+            let steps: Vec<(Vec<Vec<f64>>, f64)> = (0..zenith_rad.len())
+                .into_par_iter()
+                .map(|c| accelerator.step(&at_levels[c][0], &read[c][0]))
+                .collect();
+            for (c, (step, ground)) in steps.into_iter().enumerate() {
+                for (a, step) in at_levels[c][0].iter_mut().zip(&step) {
+                    a.iter_mut().zip(step).for_each(|(a, d)| *a += d);
+                }
+                diffuse[c] += ground;
+            }
+        }
+        correct(&mut solution.a, &pp, &at_levels, &levels, &z);
+        for c in 0..zenith_rad.len() {
             solution.ground_irradiance[c] = direct[c] + diffuse[c];
         }
-        let moved = previous.as_ref().map(|p| largest_move(&at_levels, p));
-        moved.into_iter().for_each(|m| report.moves.push(m));
-        previous = Some(at_levels);
-        if moved.is_some_and(|m| m < settings.tolerance) {
+        report.moves.push(moved);
+        if moved < settings.tolerance {
             break;
         }
     }
