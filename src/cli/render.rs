@@ -55,7 +55,7 @@ enum SingleArg {
 enum Method {
     /// The path tracer: the project's referee, noise with a standard error per pixel
     MonteCarlo,
-    /// The transport solver: no noise (zero standard errors); from the ground, suns down to 99 deg from the zenith (at twilight a spherical source, about twenty times slower than by day), no fog so far
+    /// The transport solver: no noise (zero standard errors); from the ground, suns down to 99 deg from the zenith (at twilight a spherical source, about twenty times slower than by day); the global fog too (--fog-distance-km)
     Deterministic,
 }
 

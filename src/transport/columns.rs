@@ -46,6 +46,8 @@ pub struct Columns {
     /// The irradiance on a horizontal ground under each column.
     pub ground_irradiance: Vec<f64>,
     layers: Vec<Scaled>,
+    /// Each layer's optical depth before delta-M scaling.
+    unscaled_tau: Vec<f64>,
     /// The interfaces' altitudes, top down, km.
     z_km: Vec<f64>,
     radius_km: Option<f64>,
@@ -91,6 +93,7 @@ impl Columns {
             coef,
             ground_irradiance,
             layers: scaled,
+            unscaled_tau: layers.layers.iter().map(|l| l.tau).collect(),
             z_km: interfaces_km(layers),
             radius_km: layers.shell_radius_km,
             lmax: s.lmax,
@@ -111,6 +114,54 @@ impl Columns {
     /// of them. Each sun's radiances are those `rays` gives it alone, bit
     /// for bit.
     pub fn rays_for_suns(&self, suns: &[(f64, &[f64])], mu: f64) -> Vec<Vec<f64>> {
+        let (at, path) = (self.sources_along(suns, mu), self.path(mu));
+        at.iter().map(|at| at.iter().map(|at| along(at, &path, f64::INFINITY).0).collect()).collect()
+    }
+
+    /// `rays` of the light last scattered within `reach_km` of the
+    /// observer (the talk's global fog in front of an object;
+    /// `render::fog`). The light that arrives is what was last scattered
+    /// within the reach and what comes from beyond it, L(0) = F + T L(R),
+    /// with T the true transmittance over the reach. The delta-M scaled
+    /// medium's sum along the ray to the reach, F′ (the last layer in
+    /// part, its source linear in optical path), has the scaled T′: it
+    /// counts the light that the forward peak scatters within the reach as
+    /// coming from beyond. So F = L(0) − T L(R) with L(R) = (L(0) − F′)/T′:
+    /// F = L(0) − e^{−(τ − τ′)} (L(0) − F′), τ and τ′ the reach's optical
+    /// paths before and after scaling. (Measured against the path tracer's
+    /// Shadowed Fog, clear.toml, sun 60°, 5 km, views 80 and 88°: F′ was
+    /// 3.8 and 4.7 % low.)
+    pub fn rays_to(&self, sun_zenith_rad: f64, mu: f64, phis: &[f64], reach_km: f64) -> Vec<f64> {
+        let (at, path) = (self.sources_along(&[(sun_zenith_rad, phis)], mu), self.path(mu));
+        let unscaled: f64 = {
+            let (mut travelled_km, mut tau) = (0.0, 0.0);
+            for k in (0..path.len()).rev() {
+                let (chord, optical) = path[k];
+                let ratio = self.unscaled_tau[k] / self.layers[k].tau.max(1e-300);
+                let part = ((reach_km - travelled_km) / chord).clamp(0.0, 1.0);
+                tau += optical * ratio * part;
+                travelled_km += chord;
+                if travelled_km >= reach_km {
+                    break;
+                }
+            }
+            tau
+        };
+        at[0]
+            .iter()
+            .map(|at| {
+                let (all, _) = along(at, &path, f64::INFINITY);
+                let (within, scaled) = along(at, &path, reach_km);
+                all - (scaled - unscaled).exp() * (all - within)
+            })
+            .collect()
+    }
+
+    /// The sources along the ray of zenith cosine `mu` from the ground, for
+    /// each sun and azimuth of `suns`: `[sun][azimuth][interface]`, the
+    /// source as the base of the layer above (`.0`) and as the top of the
+    /// layer below (`.1`).
+    fn sources_along(&self, suns: &[(f64, &[f64])], mu: f64) -> Vec<Vec<Vec<(f64, f64)>>> {
         let nl = self.layers.len();
         let modes = self.coef.first().map_or(0, |c| c.len());
         let sin_v = (1.0 - mu * mu).max(0.0).sqrt();
@@ -181,27 +232,16 @@ impl Columns {
                 }
             }
         }
-        // From the ground up: each layer's source, attenuated by the layers
-        // below.
-        let optical: Vec<f64> = (0..nl)
+        at
+    }
+
+    /// The ray of zenith cosine `mu` from the ground through each layer:
+    /// (chord km, optical path), bottom layer last.
+    fn path(&self, mu: f64) -> Vec<(f64, f64)> {
+        (0..self.layers.len())
             .map(|k| {
-                let l = &self.layers[k];
-                l.tau / (self.z_km[k] - self.z_km[k + 1])
-                    * chord_km(self.radius_km, 0.0, mu, self.z_km[k + 1], self.z_km[k])
-            })
-            .collect();
-        at.iter()
-            .map(|at| {
-                at.iter()
-                    .map(|at| {
-                        let (mut radiance, mut below) = (0.0f64, 0.0f64);
-                        for k in (0..nl).rev() {
-                            radiance += through_layer(at[k].1, at[k + 1].0, optical[k]) * (-below).exp();
-                            below += optical[k];
-                        }
-                        radiance
-                    })
-                    .collect()
+                let chord = chord_km(self.radius_km, 0.0, mu, self.z_km[k + 1], self.z_km[k]);
+                (chord, self.layers[k].tau / (self.z_km[k] - self.z_km[k + 1]) * chord)
             })
             .collect()
     }
@@ -231,6 +271,27 @@ impl Columns {
         };
         (cosine_at(self.radius_km, mu, z), arc)
     }
+}
+
+/// The radiance along a ray from the ground (`path`: its chord and
+/// optical path through each layer) whose sources at each interface are
+/// `at` (`Columns::sources_along`), to `reach_km` along it: each layer's
+/// source, attenuated by the layers below; and the optical path to the
+/// reach.
+fn along(at: &[(f64, f64)], path: &[(f64, f64)], reach_km: f64) -> (f64, f64) {
+    let (mut radiance, mut below, mut travelled_km) = (0.0f64, 0.0f64, 0.0f64);
+    for k in (0..path.len()).rev() {
+        let ((chord, optical), top, base) = (path[k], at[k].1, at[k + 1].0);
+        if travelled_km + chord > reach_km {
+            let f = ((reach_km - travelled_km) / chord).clamp(0.0, 1.0);
+            radiance += through_layer(base + (top - base) * f, base, optical * f) * (-below).exp();
+            return (radiance, below + optical * f);
+        }
+        radiance += through_layer(top, base, optical) * (-below).exp();
+        below += optical;
+        travelled_km += chord;
+    }
+    (radiance, below)
 }
 
 /// The pseudo-spherical columns' diffuse fields, as the coefficients of

@@ -164,11 +164,11 @@ impl Solved {
 
     /// The light of each sun of `suns_rad` (the suns solved for, one per
     /// part of the view); `pixel_rays[k]`: (pixel, zenith cosine, azimuth
-    /// from the sun) of each pixel of part k looking up, where there are
-    /// few enough of them. The other parts' tables of view nodes are made
+    /// from the sun, reach km: infinite but in fog) of each pixel of part k
+    /// looking up, where there are few enough of them or the view is fog. The other parts' tables of view nodes are made
     /// together, a view node's ray for all their suns at once
     /// (`Columns::rays_for_suns`): a part's table is what it would be alone.
-    pub(super) fn wavelengths(&self, suns_rad: &[f64], pixel_rays: &[Option<&[(usize, f64, f64)]>]) -> Vec<Wavelength> {
+    pub(super) fn wavelengths(&self, suns_rad: &[f64], pixel_rays: &[Option<&[PixelRay]>]) -> Vec<Wavelength> {
         let (cosines, azimuths) = self.resolution.view_grid;
         let phis = azimuth_nodes(azimuths);
         let mut tables: Vec<Vec<Vec<f64>>> = vec![Vec::new(); suns_rad.len()];
@@ -197,8 +197,8 @@ impl Solved {
                 let diffuse = match rays {
                     Some(rays) => {
                         let mut pixels = vec![0.0; rays.iter().map(|r| r.0 + 1).max().unwrap_or(0)];
-                        for &(i, mu, phi) in rays.iter() {
-                            pixels[i] = columns.rays(sun, mu, &[phi])[0];
+                        for &(i, mu, phi, reach_km) in rays.iter() {
+                            pixels[i] = columns.rays_to(sun, mu, &[phi], reach_km)[0];
                         }
                         DiffuseLight::Pixels(pixels)
                     }
@@ -214,6 +214,10 @@ impl Solved {
             .collect()
     }
 }
+
+/// A pixel's own ray: (pixel, zenith cosine, azimuth from the sun, reach
+/// km along it).
+pub(super) type PixelRay = (usize, f64, f64, f64);
 
 /// The light of one wavelength (a band or a spectral line), per unit solar
 /// irradiance: the diffuse light reaching the ground on a grid of view

@@ -14,12 +14,18 @@
 //! The light of each wavelength, solved once for the suns of every part of
 //! the view (the slices of a bake's strip), comes from `light`.
 //!
-//! So far: seen from the ground, without fog, any sun (twilight by the
-//! columns, whose limits `columns` states). The rest is refused with the
-//! reason.
+//! The talk's global fog (`render::fog`: a view with `fog` set) is the same
+//! sum stopped where the fog's reach along each ray ends (the object, or
+//! the ceiling): the single scattering by the same quadrature stopped
+//! there (none for the Shadowed Fog), the multiply scattered light along
+//! each pixel's own ray to its reach (`Columns::rays_to`), nothing from the
+//! ground or the sun's disk (black, the engine draws them).
+//!
+//! So far: seen from the ground, any sun (twilight by the columns, whose
+//! limits `columns` states). The rest is refused with the reason.
 
 use super::layers::Grading;
-use super::light::{between_nodes, spectral_nodes, transpose, Solved, Wavelength, PIXEL_RAYS};
+use super::light::{between_nodes, spectral_nodes, transpose, PixelRay, Solved, Wavelength, PIXEL_RAYS};
 use crate::atmosphere::Geometry;
 use crate::directions::Camera;
 use crate::render::medium::Spectral;
@@ -82,8 +88,6 @@ pub enum Unsupported {
     Twilight(f64),
     #[error("the deterministic solver sees from the ground so far (--altitude-m 0), not from {0} m")]
     Altitude(f64),
-    #[error("the deterministic solver renders no fog yet; fog renders with --method monte-carlo")]
-    Fog,
 }
 
 /// The lowest sun `sky render --method deterministic` accepts in spherical
@@ -116,9 +120,6 @@ pub fn check(view: &View) -> Result<(), Unsupported> {
     if view.altitude_m != 0.0 {
         return Err(Unsupported::Altitude(view.altitude_m));
     }
-    if view.fog.is_some() {
-        return Err(Unsupported::Fog);
-    }
     Ok(())
 }
 
@@ -149,16 +150,20 @@ pub fn render_views(
     let parts: Vec<(usize, usize, View)> =
         views.iter().enumerate().flat_map(|(v, view)| view.parts().into_iter().map(move |(x, p)| (v, x, p))).collect();
     let suns_rad: Vec<f64> = parts.iter().map(|(_, _, p)| sun_zenith_rad(p)).collect();
-    let rays: Vec<Vec<(usize, f64, f64)>> = parts.iter().map(|(_, _, p)| rays_up(p)).collect();
+    let rays: Vec<Vec<PixelRay>> = parts.iter().map(|(_, _, p)| rays_up(scene, p)).collect();
     // A LUT slice always takes the tables: a bake's strip makes them for
     // all its slices at once (`Columns::rays_for_suns`), cheaper there than
     // each texel's own ray even for the demo's 8 x 32 cloudy slices (a
     // cloudy draft's tables 9 s a wavelength against 14 s), and a slice is
-    // then the same bytes rendered alone or in a strip.
-    let pixel_rays: Vec<Option<&[(usize, f64, f64)]>> = parts
+    // then the same bytes rendered alone or in a strip. Fog always takes
+    // each pixel's own ray, to its own reach.
+    let pixel_rays: Vec<Option<&[PixelRay]>> = parts
         .iter()
         .zip(&rays)
-        .map(|((_, _, p), r)| (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. })).then_some(&r[..]))
+        .map(|((_, _, p), r)| {
+            let own = p.fog.is_some() || (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. }));
+            own.then_some(&r[..])
+        })
         .collect();
     // Each wavelength solved once for the suns of every part (the slices
     // of a strip share their columns), then read for each part's pixels.
@@ -201,15 +206,17 @@ fn sun_zenith_rad(view: &View) -> f64 {
     view.sun_direction().z.clamp(-1.0, 1.0).acos()
 }
 
-/// (pixel, zenith cosine, azimuth from the sun) of each pixel of `view`
-/// looking up.
-fn rays_up(view: &View) -> Vec<(usize, f64, f64)> {
+/// (pixel, zenith cosine, azimuth from the sun, reach km) of each pixel
+/// of `view` looking up; the reach is infinite but in fog.
+fn rays_up(scene: &Scene, view: &View) -> Vec<PixelRay> {
     let sun = view.sun_direction();
     let (w, h) = (view.width, view.height);
+    let observer = scene.medium.observer(view.altitude_m / 1000.0);
     (0..w * h)
         .filter_map(|i| {
             let dir = view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h)?;
-            (dir.z > 0.0).then(|| (i, dir.z, azimuth_between(dir, sun)))
+            let reach_km = view.fog.map_or(f64::INFINITY, |f| f.reach_km(&scene.medium, observer, dir));
+            (dir.z > 0.0).then(|| (i, dir.z, azimuth_between(dir, sun), reach_km))
         })
         .collect()
 }
@@ -230,7 +237,11 @@ fn render_part(scene: &Scene, view: &View, bands: &[Wavelength], lines: &[Wavele
             let Some(dir) = view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h) else {
                 return nothing(scene.line_optics.len());
             };
-            let disk = if view.sun_disk && mu0 > 0.0 { disk_coverage(view, i, sun, cos_half) } else { 0.0 };
+            let disk = if view.sun_disk && mu0 > 0.0 && view.fog.is_none() {
+                disk_coverage(view, i, sun, cos_half)
+            } else {
+                0.0
+            };
             let radiance = |waves: &[Wavelength], single: &SingleScattering, scale: &dyn Fn(usize) -> f64| {
                 let direct: Vec<f64> = waves
                     .iter()
@@ -239,12 +250,19 @@ fn render_part(scene: &Scene, view: &View, bands: &[Wavelength], lines: &[Wavele
                     .collect();
                 let total: Vec<f64> = if dir.z > 0.0 {
                     let phi = azimuth_between(dir, sun);
-                    let once = if waves.is_empty() { Vec::new() } else { single.radiance(dir) };
+                    let once = match view.fog {
+                        _ if waves.is_empty() => Vec::new(),
+                        None => single.radiance(dir),
+                        Some(fog) if fog.shadowed => vec![0.0; waves.len()],
+                        Some(fog) => single.radiance_to(dir, fog.max_distance_km, fog.ceiling_km),
+                    };
                     waves
                         .iter()
                         .enumerate()
                         .map(|(b, wl)| once[b] + scale(b) * wl.diffuse_radiance(i, dir.z, phi) + direct[b])
                         .collect()
+                } else if view.fog.is_some() {
+                    vec![0.0; waves.len()]
                 } else {
                     waves.iter().enumerate().map(|(b, wl)| scale(b) * wl.ground_radiance() + direct[b]).collect()
                 };
@@ -374,6 +392,53 @@ mod tests {
                     assert!(p.xyz[1] > 0.0, "sun {sun}, texel {i}: {:?}", p.xyz);
                 }
             }
+        }
+    }
+
+    /// Fog in front of nothing (infinitely far, no ceiling) is the sky
+    /// (`render::fog`: "the same radiance at infinity as the sky") for
+    /// views that do not meet the ground, bit for bit but for the single
+    /// scattering's march; nearer, it grows with the distance and stays
+    /// below the sky; the Shadowed Fog is below the lit one.
+    #[test]
+    fn fog_is_the_sky_stopped_at_its_distance() {
+        use crate::render::fog::Fog;
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
+        let atm = Atmosphere::load(&path).unwrap();
+        let spectral = crate::render::SpectralSettings {
+            band_nm: 100.0,
+            wavelength_sampling: crate::render::WavelengthSampling::Hero,
+            spectral_nm: vec![],
+            xyz: true,
+        };
+        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
+        let dirs = vec![(10.0, 0.0), (60.0, 90.0), (85.0, 180.0), (89.0, 20.0)];
+        let resolution = Resolution { streams: 4, column_step_deg: 3.0, ms_step_nm: 250.0, ..Default::default() };
+        let y_of = |fog: Option<Fog>| -> Vec<f64> {
+            let mut view = View::directions(dirs.clone(), 50.0, 0.0, 1, 1);
+            view.sun_disk = false;
+            view.fog = fog;
+            render(&scene, &view, &resolution, &|| {}).unwrap().pixels.iter().map(|p| p.xyz[1]).collect()
+        };
+        let sky = y_of(None);
+        let far = y_of(Some(Fog::lit(f64::INFINITY, None)));
+        for (s, f) in sky.iter().zip(&far) {
+            assert!((f / s - 1.0).abs() < 1e-6, "infinitely far fog {f} against the sky {s}");
+        }
+        let mut before = vec![0.0; dirs.len()];
+        for distance_km in [0.5, 2.0, 10.0, 50.0] {
+            let fog = y_of(Some(Fog::lit(distance_km, None)));
+            let shadowed = y_of(Some(Fog::lit(distance_km, None).shadowed()));
+            for k in 0..dirs.len() {
+                assert!(
+                    fog[k] > before[k] && fog[k] < sky[k],
+                    "{distance_km} km, view {k}: {} after {}",
+                    fog[k],
+                    before[k]
+                );
+                assert!(shadowed[k] > 0.0 && shadowed[k] < fog[k], "{distance_km} km, view {k}");
+            }
+            before = fog;
         }
     }
 
