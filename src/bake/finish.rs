@@ -4,7 +4,7 @@
 //! an earlier view copied; the sun's transmittance and sunlight; the
 //! global-fog LUTs from the fog slices the queue rendered.
 
-use super::cache::{slice_key, RenderedSlice};
+use super::cache::RenderedSlice;
 use super::file::BakeFile;
 use super::fog::FogTodo;
 use super::forecast::Forecasts;
@@ -208,12 +208,14 @@ impl Finisher<'_> {
         };
         let fog_after_queue = &self.forecasts.fog_after;
         let (atmosphere_hash, spectral) = (out.atmosphere_hash.clone(), out.spectral.clone());
+        let sampling = out.sampling.clone();
         // The slice as the queue rendered it (every fog slice not in the
         // cache was queued; a second slice of the same view, with the
         // cache off, gets the image at no cost). One that is neither
         // left the cache during the bake: an error.
         let render = |view: &View, index: usize| -> Result<(Image, f64), BakeError> {
-            let key = slice_key(&atmosphere_hash, &spectral, view, opts.quality.name());
+            let key =
+                super::fog::fog_slice_key(&atmosphere_hash, &spectral, view, (opts.quality, opts.method), &sampling);
             let queued =
                 queued_fog.lock().unwrap().get_mut(&key).map(|(image, cost)| (image.clone(), std::mem::take(cost)));
             let (image, cost) = queued.ok_or_else(|| BakeError::FogSliceLost {
@@ -244,6 +246,7 @@ impl Finisher<'_> {
                 sampling: &out.sampling,
                 settings: self.bake.fog,
                 quality: opts.quality,
+                method: opts.method,
             };
             let fog = super::fog::bake_fog(&job, &opts.cache, self.cancel, &render, &on_slice)?;
             tracker.lock().unwrap().emit(BakeEvent::FogDone {

@@ -15,7 +15,8 @@
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BasisSky, FogSettings, Quality, Sampling};
-use super::run::{slice_of_image, BAKE_SEED};
+use super::run::{slice_of_image, Method, BAKE_SEED};
+use super::slices::deterministic_tag;
 use super::BakeError;
 use crate::atmosphere::Atmosphere;
 use crate::bake::fog_falloff::{study, ErrorSummary};
@@ -105,7 +106,8 @@ pub fn fog_view_at(sky: &BasisSky, fog: &FogSettings, spp: u32, sun_zenith_deg: 
     }
 }
 
-/// The view of fog slice `index`'s render (its Shadowed Fog) and its cache key.
+/// The view of fog slice `index`'s render (its Shadowed Fog) and its cache
+/// key (by the transport solver, its resolution's).
 #[allow(clippy::too_many_arguments)]
 fn shadowed_view_and_key(
     sky: &BasisSky,
@@ -116,11 +118,26 @@ fn shadowed_view_and_key(
     top_km: f64,
     atmosphere_hash: &str,
     spectral: &SpectralSettings,
-    quality: Quality,
+    (quality, method): (Quality, Method),
 ) -> (View, String) {
     let view = fog_view(sky, &shadowed_settings(fog, s), s, index, radius_km, top_km, true);
-    let key = slice_key(atmosphere_hash, spectral, &view, quality.name());
+    let key = fog_slice_key(atmosphere_hash, spectral, &view, (quality, method), s);
     (view, key)
+}
+
+/// The cache key of a fog slice's render `view` (its Shadowed Fog): by the
+/// transport solver, naming its resolution.
+pub fn fog_slice_key(
+    atmosphere_hash: &str,
+    spectral: &SpectralSettings,
+    view: &View,
+    (quality, method): (Quality, Method),
+    sampling: &Sampling,
+) -> String {
+    match method {
+        Method::MonteCarlo => slice_key(atmosphere_hash, spectral, view, quality.name()),
+        Method::Deterministic => slice_key(atmosphere_hash, spectral, view, &deterministic_tag(quality, sampling)),
+    }
 }
 
 /// The Fog LUT settings the Shadowed Fog of sampling `s` is rendered at:
@@ -144,7 +161,12 @@ pub struct FogTodo {
 /// The fog slices of `sky` that [`bake_fog`] will render: those not in
 /// `cache`, each view once (two slices with the same sun share a render:
 /// the second finds the first's in the cache).
-pub fn to_render(sky: &super::SkySlices, fog: &FogSettings, cache: &SliceCache, quality: Quality) -> Vec<FogTodo> {
+pub fn to_render(
+    sky: &super::SkySlices,
+    fog: &FogSettings,
+    cache: &SliceCache,
+    quality: (Quality, Method),
+) -> Vec<FogTodo> {
     let mut todo: Vec<FogTodo> = Vec::new();
     for index in 0..sky.sky.slices {
         let (view, key) = shadowed_view_and_key(
@@ -199,6 +221,7 @@ pub struct FogJob<'a> {
     pub sampling: &'a Sampling,
     pub settings: FogSettings,
     pub quality: Quality,
+    pub method: Method,
 }
 
 /// Renders (or finds in `cache`) the fog LUTs of one basis sky: each slice
@@ -246,7 +269,7 @@ pub fn bake_fog(
             top_km,
             &atm.content_hash,
             spectral,
-            job.quality,
+            (job.quality, job.method),
         );
         let shadowed = match cache.get(&key) {
             Some(s) => {

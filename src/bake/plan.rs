@@ -88,7 +88,7 @@ pub(super) fn plan(bake: &BakeFile, opts: &BakeOptions) -> Result<Plan, BakeErro
     let fog_plan: Vec<Vec<FogTodo>> = plan
         .iter()
         .map(|p| {
-            let mut todo = super::fog::to_render(&p.out, &bake.fog, &opts.cache, opts.quality);
+            let mut todo = super::fog::to_render(&p.out, &bake.fog, &opts.cache, (opts.quality, opts.method));
             if let Some(only) = &opts.only {
                 todo.retain(|f| only.iter().any(|id| id.fog && id.sky == p.out.sky.name && id.index == f.index));
             }

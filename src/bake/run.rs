@@ -24,7 +24,7 @@
 use super::finish::Finisher;
 use super::forecast::{forecast, Forecasts};
 use super::plan::{plan, Plan};
-use super::queue::{prepare_sessions, render_queue};
+use super::queue::{prepare_sessions, render_queue, Rendered};
 use super::solver::render_strips;
 use super::tracker::{farm_options, Tracker};
 use super::BakeError;
@@ -65,15 +65,17 @@ pub fn render_slices(
             let rendered = render_queue(&plan, &sessions, &forecasts, &farm, opts, &tracker, &cancel)?;
             (forecasts, rendered)
         }
-        // The sky's slices by the solver here, then the fog's by the path
-        // tracer (the queue takes no sky slice by this method); the ETA
-        // from the pace of the texels.
+        // The sky's slices and the fog's by the solver here, each sky's
+        // in one render (no queue, no farm); the ETA from the pace of the
+        // texels.
         Method::Deterministic => {
-            let strips = render_strips(&plan, &sessions, opts.quality, &tracker, &cancel)?;
-            let forecasts = Forecasts::zero(&plan.skies);
-            let mut rendered = render_queue(&plan, &sessions, &forecasts, &farm, opts, &tracker, &cancel)?;
-            rendered.strips = strips;
-            (forecasts, rendered)
+            let (strips, fog) = render_strips(&plan, &sessions, opts.quality, &tracker, &cancel)?;
+            let rendered = Rendered {
+                grids: strips.iter().map(|_| Default::default()).collect(),
+                strips,
+                fog: fog.into_iter().map(std::sync::Mutex::new).collect(),
+            };
+            (Forecasts::zero(&plan.skies), rendered)
         }
     };
     drop(sessions);

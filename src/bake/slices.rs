@@ -173,17 +173,7 @@ pub fn sky_slice_key(
     sampling: &Sampling,
 ) -> String {
     match (method, sampling.ms_grid) {
-        (Method::Deterministic, _) => slice_key(
-            atmosphere_hash,
-            spectral,
-            view,
-            &format!(
-                "{} deterministic {:?} {}",
-                quality.name(),
-                super::solver::resolution(quality, sampling),
-                env!("SKY_TRANSPORT_SOURCE")
-            ),
-        ),
+        (Method::Deterministic, _) => slice_key(atmosphere_hash, spectral, view, &deterministic_tag(quality, sampling)),
         (Method::MonteCarlo, None) => slice_key(atmosphere_hash, spectral, view, quality.name()),
         // The grid's layout and resampling named by their source.
         (Method::MonteCarlo, Some([rows, cols])) => slice_key(
@@ -193,6 +183,17 @@ pub fn sky_slice_key(
             &format!("{} ms_grid {rows}x{cols} {}", quality.name(), env!("SKY_MS_GRID_SOURCE")),
         ),
     }
+}
+
+/// What names a slice rendered by the transport solver in its cache key
+/// (sky and fog): the quality, the solver's resolution and its source.
+pub fn deterministic_tag(quality: Quality, sampling: &Sampling) -> String {
+    format!(
+        "{} deterministic {:?} {}",
+        quality.name(),
+        super::solver::resolution(quality, sampling),
+        env!("SKY_TRANSPORT_SOURCE")
+    )
 }
 
 /// The strip of `views` (LUT slices of one basis sky, same size and

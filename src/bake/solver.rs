@@ -6,6 +6,9 @@
 //! cores. No farm and no journal: a sky's strip takes minutes, and a bake
 //! stopped between skies finds the finished skies' slices in the cache.
 //!
+//! The sky's fog slices (their Shadowed Fog; `fog`) are views of the same
+//! render: the same suns, each wavelength solved once for both.
+//!
 //! Progress: the strip's texels in proportion to the wavelengths solved.
 
 use super::plan::Plan;
@@ -13,10 +16,12 @@ use super::queue::StripOutcome;
 use super::slices::strip_view;
 use super::tracker::{QueueJob, Tracker};
 use super::{BakeError, BakeEvent, Quality, Sampling};
+use crate::render::Image;
 use crate::render::View;
 use crate::session::Session;
-use crate::transport::render::{render, Resolution};
+use crate::transport::render::{render_views, Resolution};
 use crate::transport::spherical::Detail;
+use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
 use std::time::Instant;
@@ -61,20 +66,27 @@ pub fn resolution(quality: Quality, sampling: &Sampling) -> Resolution {
     Resolution { ms_step_nm, streams: sampling.streams.unwrap_or(streams), view_grid, twilight, grading, ..default }
 }
 
+/// A fog slice's render by cache key: the image and its cost in
+/// core-seconds.
+pub(super) type FogRenders = BTreeMap<String, (Image, f64)>;
+
 /// Every basis sky's strip of the slices to render (None for a sky with
-/// none), solved at the resolution of `quality` and the sky's preset.
+/// none) and its fog slices to render, solved at the resolution of
+/// `quality` and the sky's preset.
 pub(super) fn render_strips(
     plan: &Plan,
     sessions: &[Option<Session>],
     quality: Quality,
     tracker: &Mutex<Tracker>,
     cancel: &AtomicBool,
-) -> Result<Vec<Option<StripOutcome>>, BakeError> {
-    let mut strips = Vec::new();
+) -> Result<(Vec<Option<StripOutcome>>, Vec<FogRenders>), BakeError> {
+    let (mut strips, mut fogs) = (Vec::new(), Vec::new());
     for (k, p) in plan.skies.iter().enumerate() {
         let to_render = p.to_render();
-        let Some(session) = sessions[k].as_ref().filter(|_| !to_render.is_empty()) else {
+        let fog = &plan.fog[k];
+        let Some(session) = sessions[k].as_ref().filter(|_| !to_render.is_empty() || !fog.is_empty()) else {
             strips.push(None);
+            fogs.push(FogRenders::new());
             continue;
         };
         if cancel.load(Ordering::SeqCst) {
@@ -82,11 +94,18 @@ pub(super) fn render_strips(
         }
         let sky = p.out.sky.name.clone();
         let views: Vec<&View> = to_render.iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
-        let strip = strip_view(&views);
-        let slice_texels = (views[0].width * views[0].height) as u64;
-        let texels = slice_texels * views.len() as u64;
-        let slices = to_render.iter().map(|&i| (sky.clone(), i, slice_texels)).collect();
-        tracker.lock().unwrap().start_queue(QueueJob::new(slices, &vec![0.0; to_render.len()]), 0);
+        let mut all: Vec<View> = if views.is_empty() { Vec::new() } else { vec![strip_view(&views)] };
+        all.extend(fog.iter().map(|f| f.view.clone()));
+        let mut slices: Vec<(String, usize, u64)> = Vec::new();
+        for (&i, v) in to_render.iter().zip(&views) {
+            slices.push((sky.clone(), i, (v.width * v.height) as u64));
+        }
+        for f in fog {
+            slices.push((format!("{sky} (fog)"), f.index, (f.view.width * f.view.height) as u64));
+        }
+        let texels: u64 = slices.iter().map(|s| s.2).sum();
+        let n = slices.len();
+        tracker.lock().unwrap().start_queue(QueueJob::new(slices, &vec![0.0; n]), 0);
         let resolution = resolution(quality, &p.out.sampling);
         let wavelengths = crate::transport::render::wavelengths_solved(&session.scene, &resolution);
         let done = AtomicUsize::new(0);
@@ -97,13 +116,29 @@ pub(super) fn render_strips(
             t.emit(BakeEvent::Progress(progress));
         };
         let start = Instant::now();
-        let image = render(&session.scene, &strip, &resolution, &on_wavelength)
-            .map_err(|error| BakeError::Solver { sky: sky.clone(), error })?;
+        let mut images = render_views(&session.scene, &all, &resolution, &on_wavelength)
+            .map_err(|error| BakeError::Solver { sky: sky.clone(), error })?
+            .into_iter();
+        // The cost shared by texels.
         let core_seconds = start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
+        let per_texel = core_seconds / texels.max(1) as f64;
+        let strip = (!views.is_empty()).then(|| images.next().expect("the strip's image"));
+        strips.push(strip.map(|image| {
+            let core_seconds = per_texel * (image.width * image.height) as f64;
+            StripOutcome { image, core_seconds, resumed: 0 }
+        }));
+        fogs.push(
+            fog.iter()
+                .zip(images)
+                .map(|(f, image)| {
+                    let cost = per_texel * (image.width * image.height) as f64;
+                    (f.key.clone(), (image, cost))
+                })
+                .collect(),
+        );
         let mut t = tracker.lock().unwrap();
         t.texels_before += texels;
         t.job = None;
-        strips.push(Some(StripOutcome { image, core_seconds, resumed: 0 }));
     }
-    Ok(strips)
+    Ok((strips, fogs))
 }

@@ -216,9 +216,17 @@ fn rays_up(scene: &Scene, view: &View) -> Vec<PixelRay> {
         .filter_map(|i| {
             let dir = view.camera.direction((i % w) as f64 + 0.5, (i / w) as f64 + 0.5, w, h)?;
             let reach_km = view.fog.map_or(f64::INFINITY, |f| f.reach_km(&scene.medium, observer, dir));
-            (dir.z > 0.0).then(|| (i, dir.z, azimuth_between(dir, sun), reach_km))
+            looks_up(view, dir).then(|| (i, dir.z.max(0.0), azimuth_between(dir, sun), reach_km))
         })
         .collect()
+}
+
+/// Whether a pixel of `view` toward `dir` sees the sky (or the fog)
+/// rather than the ground: above the horizon, and for fog the level
+/// directions too (the Fog LUT's horizon row: in spherical shells a level
+/// ray from the ground rises).
+fn looks_up(view: &View, dir: DVec3) -> bool {
+    dir.z > 0.0 || (view.fog.is_some() && dir.z >= 0.0)
 }
 
 /// One part of a view (a whole view, or one slice of a LUT strip),
@@ -248,7 +256,7 @@ fn render_part(scene: &Scene, view: &View, bands: &[Wavelength], lines: &[Wavele
                     .enumerate()
                     .map(|(b, wl)| disk * scale(b) * wl.sun_transmittance * disk_per_sr)
                     .collect();
-                let total: Vec<f64> = if dir.z > 0.0 {
+                let total: Vec<f64> = if looks_up(view, dir) {
                     let phi = azimuth_between(dir, sun);
                     let once = match view.fog {
                         _ if waves.is_empty() => Vec::new(),
