@@ -403,14 +403,9 @@ mod tests {
         }
     }
 
-    /// Fog in front of nothing (infinitely far, no ceiling) is the sky
-    /// (`render::fog`: "the same radiance at infinity as the sky") for
-    /// views that do not meet the ground, bit for bit but for the single
-    /// scattering's march; nearer, it grows with the distance and stays
-    /// below the sky; the Shadowed Fog is below the lit one.
-    #[test]
-    fn fog_is_the_sky_stopped_at_its_distance() {
-        use crate::render::fog::Fog;
+    /// `clear.toml` in 100 nm bands: cheap scenes for properties that do
+    /// not depend on the spectral resolution.
+    fn clear_scene() -> Scene {
         let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
         let atm = Atmosphere::load(&path).unwrap();
         let spectral = crate::render::SpectralSettings {
@@ -419,7 +414,18 @@ mod tests {
             spectral_nm: vec![],
             xyz: true,
         };
-        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
+        Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {})
+    }
+
+    /// Fog in front of nothing (infinitely far, no ceiling) is the sky
+    /// (`render::fog`: "the same radiance at infinity as the sky") for
+    /// views that do not meet the ground, bit for bit but for the single
+    /// scattering's march; nearer, it grows with the distance and stays
+    /// below the sky; the Shadowed Fog is below the lit one.
+    #[test]
+    fn fog_is_the_sky_stopped_at_its_distance() {
+        use crate::render::fog::Fog;
+        let scene = clear_scene();
         let dirs = vec![(10.0, 0.0), (60.0, 90.0), (85.0, 180.0), (89.0, 20.0)];
         let resolution = Resolution { streams: 4, column_step_deg: 3.0, ms_step_nm: 250.0, ..Default::default() };
         let y_of = |fog: Option<Fog>| -> Vec<f64> {
@@ -455,15 +461,7 @@ mod tests {
     /// each image is the view rendered alone.
     #[test]
     fn views_rendered_together_are_each_as_rendered_alone() {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
-        let atm = Atmosphere::load(&path).unwrap();
-        let spectral = crate::render::SpectralSettings {
-            band_nm: 100.0,
-            wavelength_sampling: crate::render::WavelengthSampling::Hero,
-            spectral_nm: vec![],
-            xyz: true,
-        };
-        let scene = Scene::new(&atm, &spectral, &MieCache::shared_by_tests(), &|| {});
+        let scene = clear_scene();
         let dirs = vec![(10.0, 0.0), (60.0, 90.0), (85.0, 180.0)];
         let views: Vec<View> = [30.0, 95.0].iter().map(|&sun| View::directions(dirs.clone(), sun, 0.0, 1, 1)).collect();
         let resolution = Resolution {
