@@ -178,6 +178,14 @@ impl<'a> SingleScattering<'a> {
             let p = self.origin + d * s;
             let z = m.altitude(p).clamp(0.0, m.top_km);
             let up = m.up(p);
+            // Above the ceiling and rising, a straight ray never comes back
+            // below it (its distance from the planet's centre only grows),
+            // so every step left would add nothing: stop (the steps
+            // through a cloud above the fog's ceiling were most of a fog
+            // texel's cost, each no longer than its optical depth allows).
+            if ceiling_km.is_some_and(|c| z > c) && up.dot(d) > 0.0 {
+                break;
+            }
             let mu = up.dot(d).abs().max(1e-9);
             // Far along a near-horizontal ray (in a plane-parallel medium,
             // arbitrarily long) steps grow with the distance, 2 % of it.

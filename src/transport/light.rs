@@ -195,13 +195,7 @@ impl Solved {
             .map(|((&sun, rays), table)| {
                 let columns = self.columns_for(sun);
                 let diffuse = match rays {
-                    Some(rays) => {
-                        let mut pixels = vec![0.0; rays.iter().map(|r| r.0 + 1).max().unwrap_or(0)];
-                        for &(i, mu, phi, reach_km) in rays.iter() {
-                            pixels[i] = columns.rays_to(sun, mu, &[phi], reach_km)[0];
-                        }
-                        DiffuseLight::Pixels(pixels)
-                    }
+                    Some(rays) => DiffuseLight::Pixels(pixel_radiances(columns, sun, rays)),
                     None => DiffuseLight::Table(table),
                 };
                 Wavelength {
@@ -218,6 +212,31 @@ impl Solved {
 /// A pixel's own ray: (pixel, zenith cosine, azimuth from the sun, reach
 /// km along it).
 pub(super) type PixelRay = (usize, f64, f64, f64);
+
+/// The diffuse light along each pixel's own ray, by pixel index. Rays of
+/// one zenith cosine and reach (a row of the Fog LUT: one elevation, its
+/// azimuths) share one evaluation of the sources along them
+/// (`Columns::rays_to` with all their azimuths), which is the costly
+/// part; each pixel's value is the one its ray alone gives, bit for bit.
+fn pixel_radiances(columns: &Columns, sun_zenith_rad: f64, rays: &[PixelRay]) -> Vec<f64> {
+    let mut pixels = vec![0.0; rays.iter().map(|r| r.0 + 1).max().unwrap_or(0)];
+    let mut groups: Vec<((u64, u64), Vec<(usize, f64)>)> = Vec::new();
+    for &(i, mu, phi, reach_km) in rays {
+        let key = (mu.to_bits(), reach_km.to_bits());
+        match groups.iter_mut().find(|(k, _)| *k == key) {
+            Some((_, members)) => members.push((i, phi)),
+            None => groups.push((key, vec![(i, phi)])),
+        }
+    }
+    for ((mu, reach_km), members) in groups {
+        let phis: Vec<f64> = members.iter().map(|m| m.1).collect();
+        let radiances = columns.rays_to(sun_zenith_rad, f64::from_bits(mu), &phis, f64::from_bits(reach_km));
+        for ((i, _), radiance) in members.into_iter().zip(radiances) {
+            pixels[i] = radiance;
+        }
+    }
+    pixels
+}
 
 /// The light of one wavelength (a band or a spectral line), per unit solar
 /// irradiance: the diffuse light reaching the ground on a grid of view
