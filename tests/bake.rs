@@ -228,11 +228,44 @@ fn a_deterministic_bake_packs_and_is_cached_apart_from_the_path_tracers() {
     assert_eq!(again["method"], "deterministic");
     assert_eq!(rendered(&again), [("clear".to_string(), 0, 64)]);
     assert!(before == read(), "a re-run from the cache changed the files");
+    // `sky lut verify`'s default references came from the bake's solution
+    // into its cache: the same figures as references it solves itself.
+    let (m, b) = (out.join("manifest.json"), bake.to_str().unwrap());
+    let verify = |cache: Option<&Path>| {
+        let mut a = vec!["lut", "verify", m.to_str().unwrap(), "--bake", b, "--spp", "4", "--json"];
+        a.extend(cache.map(|c| ["--cache", c.to_str().unwrap()]).into_iter().flatten());
+        sky(&a, tmp.path())
+    };
+    let (from_bake, solved) = (verify(None), verify(Some(&tmp.path().join("no-cache"))));
+    let solving = |o: &Output| String::from_utf8_lossy(&o.stderr).contains("solving the references");
+    assert!(!solving(&from_bake) && solving(&solved));
+    // The same figures, to 1e-6: the bake's deepest suns (beyond 99°)
+    // widen its spherical iteration's grid of columns, which moves the
+    // twilight's light by about 1e-9.
+    let (from_bake, solved) = (summary(&from_bake), summary(&solved));
+    for k in ["elevations", "fog"] {
+        let (a, b) = (numbers(&from_bake["skies"][0][k]), numbers(&solved["skies"][0][k]));
+        assert_eq!(a.len(), b.len(), "{k}");
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() <= 1e-6 * x.abs().max(y.abs()), "{k}: {x} against {y}");
+        }
+    }
+    assert!(from_bake["skies"][0]["fog"]["fog"]["count"].as_u64().unwrap() > 0);
     // The path tracer's slices are other slices: rendered, not found.
     let traced = run(Some("monte-carlo"));
     assert_eq!(rendered(&traced), [("clear".to_string(), 63, 1)]);
     let luts = sky::lut::decode::Luts::load(&out.join("manifest.json")).unwrap();
     assert_eq!(luts.manifest.method.as_deref(), Some("monte-carlo"));
+}
+
+/// Every number in a JSON value, depth first.
+fn numbers(v: &serde_json::Value) -> Vec<f64> {
+    match v {
+        serde_json::Value::Number(n) => vec![n.as_f64().unwrap()],
+        serde_json::Value::Array(a) => a.iter().flat_map(numbers).collect(),
+        serde_json::Value::Object(o) => o.values().flat_map(numbers).collect(),
+        _ => Vec::new(),
+    }
 }
 
 #[test]

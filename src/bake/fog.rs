@@ -1,17 +1,20 @@
 //! The global-fog LUTs of a basis sky (issue 13; `lut::fog` has the
 //! mappings): the Fog LUT and the Shadowed Fog LUT, one slice per sun
-//! elevation of the sky's time mapping, rendered by the path tracer
-//! (`render::fog`: the air below the bake's ceiling scattering toward the
-//! camera, to the ceiling or the ground); the Attenuation LUT (no Monte
-//! Carlo); and the depth falloff's (a, p), fitted to reference fog renders
-//! (`lut::fog_falloff`).
+//! elevation of the sky's time mapping (`render::fog`: the air below the
+//! bake's ceiling scattering toward the camera, to the ceiling or the
+//! ground); the Attenuation LUT (no Monte Carlo); and the depth falloff's
+//! (a, p), fitted to reference fog renders (`lut::fog_falloff`). With
+//! `--method deterministic` the slices come from the sky's own solution
+//! (`solver::render_strips`) and the falloff's references from the solver
+//! too; with `monte-carlo` both from the path tracer.
 //!
 //! Slices are cached like the sky's (the key is the view, which names the
-//! fog), the falloff and the Attenuation table under a key of their own, so
-//! a re-run renders nothing and a stopped bake resumes at the slice it was
-//! on. The slices render through the bake's session (the embedded worker or
-//! `sky worker` daemons), one farm job a slice, after the sky's slices; the
-//! falloff's references and the Attenuation table on this process.
+//! fog, and the method), the falloff and the Attenuation table under a key
+//! of their own, so a re-run renders nothing and a stopped bake resumes at
+//! the slice it was on. The path tracer's slices render through the bake's
+//! session (the embedded worker or `sky worker` daemons), one farm job a
+//! slice, after the sky's slices; the falloff's references and the
+//! Attenuation table on this process.
 
 use super::cache::{slice_key, RenderedSlice, SliceCache};
 use super::file::{BasisSky, FogSettings, Quality, Sampling};
@@ -19,7 +22,7 @@ use super::run::{slice_of_image, Method, BAKE_SEED};
 use super::slices::deterministic_tag;
 use super::BakeError;
 use crate::atmosphere::Atmosphere;
-use crate::bake::fog_falloff::{study, ErrorSummary};
+use crate::bake::fog_falloff::{fit, study, study_views_of, ErrorSummary};
 use crate::directions::mapping;
 use crate::lut::fog::{fog_texel_view, AttenuationTable, Falloff, FogGeometry};
 use crate::render::fog::Fog;
@@ -198,7 +201,18 @@ pub fn time_quadrature(scene: &Scene, view: &View) -> f64 {
 }
 
 /// The cache key of a basis sky's [`FogExtras`].
-fn extras_key(atmosphere_hash: &str, spectral: &SpectralSettings, geometry: &FogGeometry, quality: Quality) -> String {
+fn extras_key(
+    atmosphere_hash: &str,
+    spectral: &SpectralSettings,
+    geometry: &FogGeometry,
+    (quality, method): (Quality, Method),
+    sampling: &Sampling,
+) -> String {
+    // The path tracer's key as before; the solver's names its resolution.
+    let solver = match method {
+        Method::MonteCarlo => serde_json::Value::Null,
+        Method::Deterministic => deterministic_tag(quality, sampling).into(),
+    };
     let key = serde_json::json!({
         "fog_extras": 1,
         "atmosphere": atmosphere_hash,
@@ -210,6 +224,10 @@ fn extras_key(atmosphere_hash: &str, spectral: &SpectralSettings, geometry: &Fog
         "build": crate::VERSION,
         "render_source": crate::RENDER_SOURCE,
     });
+    let key = match solver {
+        serde_json::Value::Null => key,
+        tag => serde_json::json!({ "extras": key, "solver": tag }),
+    };
     blake3::hash(key.to_string().as_bytes()).to_hex().to_string()
 }
 
@@ -343,12 +361,31 @@ fn extras(
     cache: &SliceCache,
     cancel: &AtomicBool,
 ) -> Result<FogExtras, BakeError> {
-    let key = extras_key(&job.atmosphere.content_hash, &job.scene.spectral, &geometry, job.quality);
+    let key = extras_key(
+        &job.atmosphere.content_hash,
+        &job.scene.spectral,
+        &geometry,
+        (job.quality, job.method),
+        job.sampling,
+    );
     if let Some(e) = cache.get_value::<FogExtras>(&key, "fog") {
         return Ok(e);
     }
-    let s = study(job.scene, geometry, &FALLOFF_SUN_ZENITHS_DEG, falloff_spp(job.quality), BAKE_SEED, cancel, &|| {})
-        .map_err(|_| BakeError::Cancelled)?;
+    let (suns, spp) = (&FALLOFF_SUN_ZENITHS_DEG, falloff_spp(job.quality));
+    let s = match job.method {
+        Method::MonteCarlo => {
+            study(job.scene, geometry, suns, spp, BAKE_SEED, cancel, &|| {}).map_err(|_| BakeError::Cancelled)?
+        }
+        // The references by the solver at the bake's resolution: the
+        // falloff's suns (30 to 85°) are day, so a few seconds.
+        Method::Deterministic => {
+            let views = study_views_of(geometry, suns, spp, BAKE_SEED);
+            let resolution = super::solver::resolution(job.quality, job.sampling);
+            let images = crate::transport::render::render_views(job.scene, &views, &resolution, &|| {})
+                .map_err(|error| BakeError::Solver { sky: job.sky.name.clone(), error })?;
+            fit(geometry, suns, 0, &images)
+        }
+    };
     let e = FogExtras {
         falloff: s.falloff,
         fit_error: s.fit_error,

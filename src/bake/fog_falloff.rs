@@ -8,7 +8,7 @@
 
 use crate::lut::fog::{falloff_theta, Falloff, FalloffSample, FogGeometry};
 use crate::render::fog::Fog;
-use crate::render::{render, RenderError, Scene, View};
+use crate::render::{render, Image, RenderError, Scene, View};
 use serde::{Deserialize, Serialize};
 use std::sync::atomic::AtomicBool;
 
@@ -83,8 +83,9 @@ impl FalloffStudy {
 }
 
 /// Renders the reference fog of `scene` under `geometry` at each sun
-/// zenith angle (sun at azimuth 0) and fits the falloff. `on_view` is
-/// called after each of the (suns × elevations × (depths + 1)) renders.
+/// zenith angle (sun at azimuth 0) by the path tracer and fits the
+/// falloff. `on_view` is called after each of the (suns × elevations ×
+/// (depths + 1)) renders.
 pub fn study(
     scene: &Scene,
     geometry: FogGeometry,
@@ -94,23 +95,51 @@ pub fn study(
     cancel: &AtomicBool,
     on_view: &(dyn Fn() + Sync),
 ) -> Result<FalloffStudy, RenderError> {
-    let mut curves = Vec::new();
+    let views = study_views_of(geometry, sun_zenith_degs, spp, seed);
+    let images = views
+        .iter()
+        .map(|view| {
+            let image = render(scene, view, cancel, &|| {})?;
+            on_view();
+            Ok(image)
+        })
+        .collect::<Result<Vec<Image>, RenderError>>()?;
+    Ok(fit(geometry, sun_zenith_degs, spp, &images))
+}
+
+/// The reference views of [`study`], in the order [`fit`] reads their
+/// images: by sun, view elevation, then the full depth (x = 1) and each of
+/// [`DEPTHS_X`]; each of the [`AZIMUTHS_DEG`] at `spp` samples (for the
+/// path tracer).
+pub fn study_views_of(geometry: FogGeometry, sun_zenith_degs: &[f64], spp: u32, seed: u64) -> Vec<View> {
+    let mut views = Vec::new();
     for &sun_zenith_deg in sun_zenith_degs {
         for &elevation_deg in &ELEVATIONS_DEG {
             let depth_max = geometry.depth_max_km(elevation_deg);
             let dirs: Vec<(f64, f64)> = AZIMUTHS_DEG.iter().map(|&a| (90.0 - elevation_deg, a)).collect();
-            let y_at = |x: f64| -> Result<Vec<f64>, RenderError> {
+            for x in std::iter::once(1.0).chain(DEPTHS_X) {
                 let fog = Fog::lit(x * depth_max, Some(geometry.ceiling_km));
-                let view = View {
+                views.push(View {
                     fog: Some(fog),
                     ..View::directions(dirs.clone(), sun_zenith_deg, geometry.observer_altitude_km * 1000.0, spp, seed)
-                };
-                let image = render(scene, &view, cancel, &|| {})?;
-                on_view();
-                Ok(image.pixels.iter().map(|p| p.xyz[1]).collect())
-            };
-            let full = y_at(1.0)?;
-            let partial: Vec<Vec<f64>> = DEPTHS_X.iter().map(|&x| y_at(x)).collect::<Result<_, _>>()?;
+                });
+            }
+        }
+    }
+    views
+}
+
+/// The falloff fitted to `images`, the renders of [`study_views_of`]
+/// (`spp` recorded as the references' samples).
+pub fn fit(geometry: FogGeometry, sun_zenith_degs: &[f64], spp: u32, images: &[Image]) -> FalloffStudy {
+    let y = |image: &Image| -> Vec<f64> { image.pixels.iter().map(|p| p.xyz[1]).collect() };
+    let mut curves = Vec::new();
+    let mut images = images.iter();
+    for &sun_zenith_deg in sun_zenith_degs {
+        for &elevation_deg in &ELEVATIONS_DEG {
+            let full = y(images.next().expect("an image per view"));
+            let partial: Vec<Vec<f64>> =
+                DEPTHS_X.iter().map(|_| y(images.next().expect("an image per view"))).collect();
             for (k, &azimuth_from_sun_deg) in AZIMUTHS_DEG.iter().enumerate() {
                 let ratios = partial.iter().map(|ys| if full[k] > 0.0 { ys[k] / full[k] } else { f64::NAN }).collect();
                 curves.push(FogCurve { sun_zenith_deg, elevation_deg, azimuth_from_sun_deg, full_y: full[k], ratios });
@@ -131,7 +160,7 @@ pub fn study(
     s.depth_free_error = ErrorSummary::of(
         samples.iter().filter(|x| x.ratio > 0.0 && x.ratio.is_finite()).map(|x| (1.0 / x.ratio - 1.0).abs()).collect(),
     );
-    Ok(s)
+    s
 }
 
 /// How many renders [`study`] makes for `suns` sun elevations.

@@ -19,6 +19,7 @@ pub mod pack_ambient;
 pub mod pack_fog;
 mod plan;
 mod queue;
+pub mod references;
 pub mod run;
 pub mod slices;
 pub mod solver;

@@ -69,7 +69,8 @@ pub fn render_slices(
         // in one render (no queue, no farm); the ETA from the pace of the
         // texels.
         Method::Deterministic => {
-            let (strips, fog) = render_strips(&plan, &sessions, opts.quality, &tracker, &cancel)?;
+            let references = opts.only.is_none().then_some((&opts.cache, bake.fog.ceiling_km));
+            let (strips, fog) = render_strips(&plan, &sessions, opts.quality, references, &tracker, &cancel)?;
             let rendered = Rendered {
                 grids: strips.iter().map(|_| Default::default()).collect(),
                 strips,

@@ -11,9 +11,11 @@
 //!
 //! Progress: the strip's texels in proportion to the wavelengths solved.
 
+use super::cache::SliceCache;
 use super::plan::Plan;
 use super::queue::StripOutcome;
-use super::slices::strip_view;
+use super::references::ReferenceViews;
+use super::slices::{deterministic_tag, strip_view};
 use super::tracker::{QueueJob, Tracker};
 use super::{BakeError, BakeEvent, Quality, Sampling};
 use crate::render::Image;
@@ -63,7 +65,17 @@ pub fn resolution(quality: Quality, sampling: &Sampling) -> Resolution {
         Quality::Draft => default.grading.coarser(),
         Quality::Final => default.grading,
     };
-    Resolution { ms_step_nm, streams: sampling.streams.unwrap_or(streams), view_grid, twilight, grading, ..default }
+    // Every view from the view nodes' table (the LUT slices always are;
+    // `sky lut verify`'s references as they).
+    Resolution {
+        ms_step_nm,
+        streams: sampling.streams.unwrap_or(streams),
+        view_grid,
+        twilight,
+        grading,
+        pixel_rays: 0,
+        ..default
+    }
 }
 
 /// A fog slice's render by cache key: the image and its cost in
@@ -72,11 +84,15 @@ pub(super) type FogRenders = BTreeMap<String, (Image, f64)>;
 
 /// Every basis sky's strip of the slices to render (None for a sky with
 /// none) and its fog slices to render, solved at the resolution of
-/// `quality` and the sky's preset.
+/// `quality` and the sky's preset. With `references` (the cache and the
+/// fog's ceiling), a sky that renders anything also renders `sky lut
+/// verify`'s default references in the same solution into the cache
+/// (`references`), unless they are there.
 pub(super) fn render_strips(
     plan: &Plan,
     sessions: &[Option<Session>],
     quality: Quality,
+    references: Option<(&SliceCache, f64)>,
     tracker: &Mutex<Tracker>,
     cancel: &AtomicBool,
 ) -> Result<(Vec<Option<StripOutcome>>, Vec<FogRenders>), BakeError> {
@@ -96,6 +112,24 @@ pub(super) fn render_strips(
         let views: Vec<&View> = to_render.iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
         let mut all: Vec<View> = if views.is_empty() { Vec::new() } else { vec![strip_view(&views)] };
         all.extend(fog.iter().map(|f| f.view.clone()));
+        // `sky lut verify`'s references, if not in the cache: rendered
+        // after the slices, priced in with them.
+        let verify = references.and_then(|(cache, ceiling_km)| {
+            let o = &p.out;
+            let refs = ReferenceViews::new(
+                (o.radius_km, o.top_km, o.sky.altitude_m),
+                (super::references::DIRECTIONS, &super::references::CENTRE_SLICES),
+                (1, 1),
+                Some(ceiling_km),
+            );
+            let key = refs.key(&o.atmosphere_hash, &o.spectral, &deterministic_tag(quality, &o.sampling));
+            let views = refs.all();
+            super::references::cached(cache, &key, &views).is_none().then_some((cache, key, views))
+        });
+        let first_reference = all.len();
+        if let Some((_, _, views)) = &verify {
+            all.extend(views.iter().cloned());
+        }
         let mut slices: Vec<(String, usize, u64)> = Vec::new();
         for (&i, v) in to_render.iter().zip(&views) {
             slices.push((sky.clone(), i, (v.width * v.height) as u64));
@@ -117,8 +151,12 @@ pub(super) fn render_strips(
         };
         let start = Instant::now();
         let mut images = render_views(&session.scene, &all, &resolution, &on_wavelength)
-            .map_err(|error| BakeError::Solver { sky: sky.clone(), error })?
-            .into_iter();
+            .map_err(|error| BakeError::Solver { sky: sky.clone(), error })?;
+        if let Some((cache, key, _)) = &verify {
+            super::references::store(cache, key, &images[first_reference..])?;
+        }
+        images.truncate(first_reference);
+        let mut images = images.into_iter();
         // The cost shared by texels.
         let core_seconds = start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
         let per_texel = core_seconds / texels.max(1) as f64;

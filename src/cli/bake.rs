@@ -30,7 +30,7 @@ pub struct BakeArgs {
     /// Quality preset of the bake file
     #[arg(long, value_enum, default_value = "draft")]
     quality: QualityArg,
-    /// How the sky slices' light is computed: deterministic (the transport solver: no noise; the slices of a basis sky share one solution, on this machine's cores; a draft costs minutes, see docs/bakes.md "The method") or monte-carlo (the path tracer, the talk's way and the referee: noise that the samples bring down; on the embedded worker or the farm). The fog LUTs come from the path tracer either way so far (on the farm with --farm)
+    /// How the sky and fog slices' light is computed: deterministic (the transport solver: no noise; the slices of a basis sky share one solution, on this machine's cores; a draft costs minutes, see docs/bakes.md "The method") or monte-carlo (the path tracer, the talk's way and the referee: noise that the samples bring down; on the embedded worker or the farm). The fog LUTs and their depth falloff's references come from the same method
     #[arg(long, value_enum, default_value = "deterministic")]
     method: MethodArg,
     /// Linear RGB space of the textures: rec709, rec2020, acescg or xyz (the manifest records its matrix)

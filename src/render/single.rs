@@ -178,17 +178,12 @@ impl<'a> SingleScattering<'a> {
             let p = self.origin + d * s;
             let z = m.altitude(p).clamp(0.0, m.top_km);
             let up = m.up(p);
-            // Above the ceiling and rising, a straight ray never comes back
-            // below it (its distance from the planet's centre only grows),
-            // so every step left would add nothing: stop (the steps
-            // through a cloud above the fog's ceiling were most of a fog
-            // texel's cost, each no longer than its optical depth allows).
+            // Above the ceiling and rising, a straight ray never comes back: the rest would add nothing.
             if ceiling_km.is_some_and(|c| z > c) && up.dot(d) > 0.0 {
                 break;
             }
             let mu = up.dot(d).abs().max(1e-9);
-            // Far along a near-horizontal ray (in a plane-parallel medium,
-            // arbitrarily long) steps grow with the distance, 2 % of it.
+            // Far along a near-horizontal ray (plane-parallel: arbitrarily long) steps grow, 2 % of the distance.
             let mut ds = ((0.05 + 0.05 * z) / mu).min(MAX_STEP_KM.max(0.02 * s)).min(end - s);
             // At most MAX_STEP_TAU of optical depth per step along the view
             // and toward the sun (which changes by σ_t |Δz| / μ_sun), with

@@ -27,26 +27,23 @@ use crate::atmosphere::Atmosphere;
 use crate::bake::cache::SliceCache;
 use crate::bake::file::BakeFile;
 use crate::bake::run::spectral_settings;
+use crate::bake::slices::deterministic_tag;
 use crate::bake::BakeError;
 use crate::colour::error as colour_error;
 use crate::colour::ColourSpace;
 use crate::directions::camera::{direction_deg, Camera};
-use crate::directions::mapping;
 use crate::lut::decode::Luts;
 use crate::mie::MieCache;
 use crate::render::tracer::Estimator;
-use crate::render::{SingleScatter, View};
+use crate::render::{Image, SingleScatter, View};
 use crate::session::farm::{Options, WorkerSpec};
 use crate::session::{OpticsCache, Session};
 use crate::stats::{percentile, sky_lattice};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
-/// The elevations between slices, degrees.
-pub const BETWEEN_SLICES_DEG: [f64; 7] = [41.7, 23.3, 8.2, 3.1, 0.4, -2.7, -7.5];
-
-/// The seed of reference renders (not the bake's: independent noise).
-pub const REFERENCE_SEED: u64 = 0x0ef0_5eed;
+use crate::bake::references::{self, ReferenceViews};
+pub use crate::bake::references::{BETWEEN_SLICES_DEG, REFERENCE_SEED};
 
 #[derive(Debug, Clone)]
 pub struct VerifyOptions {
@@ -68,10 +65,10 @@ pub struct VerifyOptions {
 impl Default for VerifyOptions {
     fn default() -> VerifyOptions {
         VerifyOptions {
-            directions: 400,
+            directions: references::DIRECTIONS,
             spp: 256,
             fog_spp: 4096,
-            centre_slices: vec![10, 30, 44, 47, 52, 60],
+            centre_slices: references::CENTRE_SLICES.to_vec(),
             reference: crate::bake::Method::Deterministic,
             workers: Vec::new(),
         }
@@ -145,11 +142,65 @@ pub struct SkyVerification {
     pub fog: Option<super::verify_fog::FogVerification>,
 }
 
+/// The references of one basis sky: its sky views' images where the
+/// solver renders them (None: the path tracer renders each in turn, after
+/// its progress line) and its fog views' images. The solver's come from
+/// `cache` when a deterministic bake left them there under `key`
+/// (`bake::references`), else it renders all of them at once (each
+/// wavelength solved once) at the bake's resolution, and leaves them there;
+/// `solving` is called before it does.
+fn render_references(
+    (session, sky, solving): (&Session, &str, &dyn Fn()),
+    refs: &ReferenceViews,
+    method: crate::bake::Method,
+    (quality, sampling): (crate::bake::Quality, &crate::bake::Sampling),
+    cache: Option<(&SliceCache, String)>,
+    cancel: &Arc<AtomicBool>,
+) -> Result<(Vec<Option<Image>>, Vec<Image>), BakeError> {
+    let n = refs.sky.len();
+    match method {
+        crate::bake::Method::Deterministic => {
+            let all = refs.all();
+            let cached = cache.as_ref().and_then(|(c, key)| references::cached(c, key, &all));
+            let mut images = match cached {
+                Some(images) => images,
+                None => {
+                    solving();
+                    let resolution = crate::bake::solver::resolution(quality, sampling);
+                    let images = crate::transport::render::render_views(&session.scene, &all, &resolution, &|| {})
+                        .map_err(|error| BakeError::Solver { sky: sky.to_string(), error })?;
+                    if let Some((c, key)) = &cache {
+                        references::store(c, key, &images)?;
+                    }
+                    images
+                }
+            };
+            let fog = images.split_off(n);
+            Ok((images.into_iter().map(Some).collect(), fog))
+        }
+        crate::bake::Method::MonteCarlo => {
+            let fog = refs
+                .fog
+                .iter()
+                .map(|view| {
+                    let r = session.render_view(view, cancel.clone()).map_err(|source| BakeError::Render {
+                        sky: format!("{sky} (fog reference)"),
+                        index: usize::MAX,
+                        source,
+                    })?;
+                    Ok(r.image)
+                })
+                .collect::<Result<Vec<Image>, BakeError>>()?;
+            Ok((vec![None; n], fog))
+        }
+    }
+}
+
 /// Verifies every basis sky of `luts` that `bake` names (the bake file
 /// gives the atmospheres and the quality's spectral settings);
 /// `on_reference(sky, sun elevation)` is called before each reference
 /// render, for progress (the elevation NaN before the solver's references
-/// of a whole sky).
+/// of a whole sky, unless they come from the bake's cache).
 #[allow(clippy::too_many_arguments)]
 pub fn verify(
     luts: &Luts,
@@ -171,12 +222,18 @@ pub fn verify(
             .map_err(|error| BakeError::Atmosphere { sky: sky.name.clone(), error })?;
         let sampling = sky.sampling(quality).clone();
         let spectral = spectral_settings(&sampling);
+        let atm_hash = atm.content_hash.clone();
         let session =
             Session::new(atm, bundle, spectral.clone(), optics, mie, opts.workers.clone(), Options::default(), &|| {});
-        let mut elevations: Vec<(f64, bool)> = BETWEEN_SLICES_DEG.iter().map(|&e| (e, false)).collect();
-        for &i in &opts.centre_slices {
-            elevations.push((90.0 - mapping::slice_sun_zenith_deg(i, entry.planet_radius_km, entry.top_km), true));
-        }
+        let fog_ceiling_km =
+            luts.manifest.fog.as_ref().filter(|f| f.skies.iter().any(|s| s.name == entry.name)).map(|f| f.ceiling_km);
+        let refs = ReferenceViews::new(
+            (entry.planet_radius_km, entry.top_km, sky.altitude_m),
+            (opts.directions, &opts.centre_slices),
+            (opts.spp, opts.fog_spp),
+            fog_ceiling_km,
+        );
+        let elevations = refs.elevations.clone();
         // The interpolation part of the error, without noise.
         let model = crate::study::interpolation::SingleScatteringSky {
             scene: &session.scene,
@@ -186,20 +243,17 @@ pub fn verify(
         let elevs: Vec<f64> = elevations.iter().map(|e| e.0.max(0.0)).collect();
         let split = crate::study::interpolation::split(&model, entry, &elevs, &lattice);
         use crate::study::interpolation::SkyModel;
-        let views: Vec<View> = elevations
-            .iter()
-            .map(|&(elev, _)| View::directions(dirs.clone(), 90.0 - elev, sky.altitude_m, opts.spp, REFERENCE_SEED))
-            .collect();
-        let mut solved = match opts.reference {
-            crate::bake::Method::Deterministic => {
-                on_reference(&sky.name, f64::NAN);
-                let resolution = crate::bake::solver::resolution(quality, &sampling);
-                let images = crate::transport::render::render_views(&session.scene, &views, &resolution, &|| {})
-                    .map_err(|error| BakeError::Solver { sky: sky.name.clone(), error })?;
-                images.into_iter().map(Some).collect()
-            }
-            crate::bake::Method::MonteCarlo => vec![None; views.len()],
-        };
+        let solver_cache = cache.map(|c| (c, refs.key(&atm_hash, &spectral, &deterministic_tag(quality, &sampling))));
+        let solving = || on_reference(&sky.name, f64::NAN);
+        let (mut solved, fog_images) = render_references(
+            (&session, &sky.name, &solving),
+            &refs,
+            opts.reference,
+            (quality, &sampling),
+            solver_cache,
+            &cancel,
+        )?;
+        let views = &refs.sky;
         let mut errors = Vec::new();
         for (k, ((elev, centre), (both, direction))) in elevations.into_iter().zip(split).enumerate() {
             let image = match solved[k].take() {
@@ -281,7 +335,7 @@ pub fn verify(
             Some(Some((m, p))) => (Some(m), Some(p)),
             _ => (None, None),
         };
-        let fog = super::verify_fog::verify_fog(luts, &entry.name, &session, sky.altitude_m, opts.fog_spp, &cancel)?;
+        let fog = super::verify_fog::fog_errors(luts, &entry.name, &session, &fog_images);
         out.push(SkyVerification {
             sky: entry.name.clone(),
             elevations: errors,

@@ -6,26 +6,15 @@
 //! against the quadrature's transmittance of the same rays. Each is
 //! summarised by the median and 99th percentile relative error of Y.
 
-use super::verify::REFERENCE_SEED;
-use crate::bake::BakeError;
 use crate::directions::camera::direction_deg;
 use crate::lut::decode::Luts;
-use crate::render::fog::Fog;
-use crate::render::View;
+use crate::render::Image;
 use crate::session::Session;
 use crate::stats::percentile;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
-/// Sun elevations of the fog's references, degrees: between slices (day,
-/// low sun, sunset).
-pub const FOG_SUN_ELEVATIONS_DEG: [f64; 3] = [41.7, 8.2, 0.4];
-/// Object depths, km.
-pub const FOG_DEPTHS_KM: [f64; 5] = [0.1, 1.0, 5.0, 20.0, 50.0];
-/// View elevations, degrees (the terrain's neighbourhood densely).
-pub const FOG_VIEW_ELEVATIONS_DEG: [f64; 5] = [0.7, 2.5, 6.0, 15.0, 40.0];
-/// View azimuths from the sun, degrees.
-pub const FOG_VIEW_AZIMUTHS_DEG: [f64; 3] = [20.0, 100.0, 170.0];
+pub use crate::bake::references::{
+    fog_directions, FOG_DEPTHS_KM, FOG_SUN_ELEVATIONS_DEG, FOG_VIEW_AZIMUTHS_DEG, FOG_VIEW_ELEVATIONS_DEG,
+};
 
 /// Median and 99th percentile of a relative error.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
@@ -56,39 +45,23 @@ pub struct FogVerification {
     pub fog_median_by_depth: Vec<f64>,
 }
 
-/// Verifies the fog of the basis sky `name` (None if the bake has none).
-pub fn verify_fog(
-    luts: &Luts,
-    name: &str,
-    session: &Session,
-    altitude_m: f64,
-    spp: u32,
-    cancel: &Arc<AtomicBool>,
-) -> Result<Option<FogVerification>, BakeError> {
-    let Some(entry) = luts.manifest.fog.as_ref() else { return Ok(None) };
-    let Some(f) = entry.skies.iter().find(|s| s.name == name) else { return Ok(None) };
+/// Verifies the fog of the basis sky `name` against `images`, the renders
+/// of its fog's reference views (`bake::references::ReferenceViews::fog`;
+/// None if the bake has no fog for it).
+pub fn fog_errors(luts: &Luts, name: &str, session: &Session, images: &[Image]) -> Option<FogVerification> {
+    let entry = luts.manifest.fog.as_ref()?;
+    let f = entry.skies.iter().find(|s| s.name == name)?;
     let geometry = crate::lut::decode_fog::geometry_of(f, entry.ceiling_km);
-    let dirs: Vec<(f64, f64)> = FOG_VIEW_ELEVATIONS_DEG
-        .iter()
-        .flat_map(|&e| FOG_VIEW_AZIMUTHS_DEG.iter().map(move |&a| (90.0 - e, a)))
-        .collect();
+    let dirs = fog_directions();
     let y = |rgb: [f64; 3]| crate::colour::apply(&luts.manifest.colour.xyz_from_rgb, rgb)[1];
     let (mut lit, mut shadowed, mut noise) = (Vec::new(), Vec::new(), Vec::new());
     let mut by_depth = vec![Vec::new(); FOG_DEPTHS_KM.len()];
+    let mut images = images.iter();
     for &sun_elevation in &FOG_SUN_ELEVATIONS_DEG {
         for (k, &depth) in FOG_DEPTHS_KM.iter().enumerate() {
             for shadow in [false, true] {
-                let fog = Fog { max_distance_km: depth, ceiling_km: Some(entry.ceiling_km), shadowed: shadow };
-                let view = View {
-                    fog: Some(fog),
-                    ..View::directions(dirs.clone(), 90.0 - sun_elevation, altitude_m, spp, REFERENCE_SEED)
-                };
-                let r = session.render_view(&view, cancel.clone()).map_err(|source| BakeError::Render {
-                    sky: format!("{name} (fog reference)"),
-                    index: usize::MAX,
-                    source,
-                })?;
-                for (p, &(z, a)) in r.image.pixels.iter().zip(&dirs) {
+                let image = images.next().expect("an image per reference view");
+                for (p, &(z, a)) in image.pixels.iter().zip(&dirs) {
                     let want = p.xyz[1];
                     if !(want > 0.0) {
                         continue;
@@ -123,11 +96,11 @@ pub fn verify_fog(
             }
         }
     }
-    Ok(Some(FogVerification {
+    Some(FogVerification {
         fog: Spread::of(lit),
         shadowed: Spread::of(shadowed),
         attenuation: Spread::of(attenuation),
         reference_noise: percentile(&mut noise, 0.5),
         fog_median_by_depth: by_depth.into_iter().map(|mut v| percentile(&mut v, 0.5)).collect(),
-    }))
+    })
 }

@@ -414,6 +414,35 @@ mod tests {
         worst
     }
 
+    /// Rays of one elevation and reach share their sources' evaluation
+    /// (`pixel_radiances`), and each pixel still gets the value its ray
+    /// alone gives, bit for bit: fog rows, mixed with rays of other
+    /// elevations and reaches, in any order.
+    #[test]
+    fn rays_of_one_elevation_share_their_sources_bit_for_bit() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml");
+        let atm = Atmosphere::load(&path).unwrap();
+        let medium = Medium::new(&atm);
+        let optics = medium.spectral(&atm, 550.0, 1.0, 0.3, &MieCache::shared_by_tests());
+        let layers = Layers::new(&medium, &optics, 8, &Grading::default().coarser());
+        let sun = 60f64.to_radians();
+        let columns = Columns::solve(&layers, 4, columns::grid(&layers, sun, 2f64.to_radians()));
+        let rays: Vec<PixelRay> = vec![
+            (3, 0.3, 0.2, 5.0),
+            (0, 0.3, 1.7, 5.0),
+            (5, 0.5, 0.2, 5.0),
+            (1, 0.3, 2.9, 5.0),
+            (2, 0.3, 0.2, f64::INFINITY),
+            (4, 0.5, 3.1, 5.0),
+        ];
+        let shared = pixel_radiances(&columns, sun, &rays);
+        for &(i, mu, phi, reach_km) in &rays {
+            let alone = columns.rays_to(sun, mu, &[phi], reach_km)[0];
+            assert!(alone > 0.0);
+            assert_eq!(shared[i].to_bits(), alone.to_bits(), "pixel {i}");
+        }
+    }
+
     /// Catmull-Rom reproduces a cubic's values at the nodes and sums to one.
     #[test]
     fn catmull_rom_weights_are_a_partition_of_unity() {

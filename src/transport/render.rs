@@ -60,6 +60,13 @@ pub struct Resolution {
     pub view_grid: (usize, usize),
     /// The spherical source iteration's settings (`spherical::Detail`).
     pub twilight: super::spherical::Detail,
+    /// A view (other than a LUT slice or fog) with at most this many
+    /// pixels looking up has each pixel's own ray instead of the table of
+    /// view nodes ([`PIXEL_RAYS`]). The bake's resolutions set 0
+    /// (`bake::solver::resolution`): `sky lut verify`'s references at 13
+    /// suns then share the table's rays (one view node's ray serves every
+    /// sun) instead of a ray a direction and sun.
+    pub pixel_rays: usize,
 }
 
 impl Default for Resolution {
@@ -74,6 +81,7 @@ impl Default for Resolution {
             ms_step_nm: 0.0,
             view_grid: (VIEW_NODES, AZIMUTH_INTERVALS),
             twilight: super::spherical::Detail::Full,
+            pixel_rays: PIXEL_RAYS,
         }
     }
 }
@@ -138,7 +146,8 @@ pub fn render(
 /// `render` for several views at once (`sky lut verify`'s references at
 /// its sun elevations): each wavelength solved once for the suns of all
 /// of them. Each image is the one `render` gives its view alone, bit for
-/// bit.
+/// bit, while no sun is beyond `MAX_SUN_ZENITH_DEG` (such a sun widens the
+/// twilight's grid of columns for all: about 1e-9 of the twilight's light).
 pub fn render_views(
     scene: &Scene,
     views: &[View],
@@ -161,7 +170,7 @@ pub fn render_views(
         .iter()
         .zip(&rays)
         .map(|((_, _, p), r)| {
-            let own = p.fog.is_some() || (r.len() <= PIXEL_RAYS && !matches!(p.camera, Camera::Lut { .. }));
+            let own = p.fog.is_some() || (r.len() <= resolution.pixel_rays && !matches!(p.camera, Camera::Lut { .. }));
             own.then_some(&r[..])
         })
         .collect();
