@@ -251,6 +251,23 @@ fn a_deterministic_bake_packs_and_is_cached_apart_from_the_path_tracers() {
         }
     }
     assert!(from_bake["skies"][0]["fog"]["fog"]["count"].as_u64().unwrap() > 0);
+    // The forecast: one pilot wavelength of the sky, then progress with an
+    // ETA, ending with every texel done.
+    let events = bake_events(
+        &["bake-luts", bake.to_str().unwrap(), "--out", tmp.path().join("again").to_str().unwrap(), "--json-progress"],
+        tmp.path(),
+    );
+    let at = |name: &str| events.iter().position(|e| e["event"] == name).unwrap();
+    let pilots: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "planning").collect();
+    assert_eq!(pilots.len(), 1, "{pilots:?}");
+    assert_eq!((&pilots[0]["from"], &pilots[0]["sky"]), (&"solver's pilots".into(), &"clear".into()));
+    let forecast = &events[at("forecast")];
+    assert!(forecast["core_seconds"].as_f64().unwrap() > 0.0, "{forecast}");
+    assert!(at("planning") < at("forecast") && at("forecast") < at("progress"));
+    let progress: Vec<&serde_json::Value> = events.iter().filter(|e| e["event"] == "progress").collect();
+    assert!(progress.iter().all(|e| e["eta_s"].is_f64()), "{progress:?}");
+    let last = progress.last().unwrap();
+    assert_eq!(last["texels_done"], last["texels_total"], "{last}");
     // The path tracer's slices are other slices: rendered, not found.
     let traced = run(Some("monte-carlo"));
     assert_eq!(rendered(&traced), [("clear".to_string(), 63, 1)]);

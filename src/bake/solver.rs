@@ -9,7 +9,8 @@
 //! The sky's fog slices (their Shadowed Fog; `fog`) are views of the same
 //! render: the same suns, each wavelength solved once for both.
 //!
-//! Progress: the strip's texels in proportion to the wavelengths solved.
+//! Progress: the strip's texels in proportion to the wavelengths solved;
+//! the ETA from the "solver's pilots" (`render_strips`).
 
 use super::cache::SliceCache;
 use super::plan::Plan;
@@ -21,8 +22,9 @@ use super::{BakeError, BakeEvent, Quality, Sampling};
 use crate::render::Image;
 use crate::render::View;
 use crate::session::Session;
-use crate::transport::render::{render_views, Resolution};
+use crate::transport::render::{Resolution, SolvedWavelength, Staged, WavelengthId};
 use crate::transport::spherical::Detail;
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Mutex;
@@ -82,12 +84,81 @@ pub fn resolution(quality: Quality, sampling: &Sampling) -> Resolution {
 /// core-seconds.
 pub(super) type FogRenders = BTreeMap<String, (Image, f64)>;
 
+/// One basis sky's views to solve: its strip (if any slice is to render),
+/// its fog slices, and `sky lut verify`'s references if they are to
+/// render (the cache and their key), and the queue's slices.
+struct SkyJob<'a> {
+    sky: String,
+    all: Vec<View>,
+    strip: bool,
+    first_reference: usize,
+    verify: Option<(&'a SliceCache, String)>,
+    slices: Vec<(String, usize, u64)>,
+    resolution: Resolution,
+}
+
+impl SkyJob<'_> {
+    fn texels(&self) -> u64 {
+        self.slices.iter().map(|s| s.2).sum()
+    }
+}
+
+/// The views of basis sky `k` of `plan` to solve, None with none.
+fn sky_job<'a>(
+    plan: &Plan,
+    k: usize,
+    quality: Quality,
+    references: Option<(&'a SliceCache, f64)>,
+) -> Option<SkyJob<'a>> {
+    let p = &plan.skies[k];
+    let (to_render, fog) = (p.to_render(), &plan.fog[k]);
+    if to_render.is_empty() && fog.is_empty() {
+        return None;
+    }
+    let sky = p.out.sky.name.clone();
+    let views: Vec<&View> = to_render.iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
+    let mut all: Vec<View> = if views.is_empty() { Vec::new() } else { vec![strip_view(&views)] };
+    all.extend(fog.iter().map(|f| f.view.clone()));
+    // `sky lut verify`'s references, if not in the cache: rendered after
+    // the slices, priced in with them.
+    let first_reference = all.len();
+    let verify = references.and_then(|(cache, ceiling_km)| {
+        let o = &p.out;
+        let refs = ReferenceViews::new(
+            (o.radius_km, o.top_km, o.sky.altitude_m),
+            (super::references::DIRECTIONS, &super::references::CENTRE_SLICES),
+            (1, 1),
+            Some(ceiling_km),
+        );
+        let key = refs.key(&o.atmosphere_hash, &o.spectral, &deterministic_tag(quality, &o.sampling));
+        let views = refs.all();
+        super::references::cached(cache, &key, &views).is_none().then(|| {
+            all.extend(views);
+            (cache, key)
+        })
+    });
+    let mut slices: Vec<(String, usize, u64)> = Vec::new();
+    for (&i, v) in to_render.iter().zip(&views) {
+        slices.push((sky.clone(), i, (v.width * v.height) as u64));
+    }
+    for f in fog {
+        slices.push((format!("{sky} (fog)"), f.index, (f.view.width * f.view.height) as u64));
+    }
+    let resolution = resolution(quality, &p.out.sampling);
+    Some(SkyJob { sky, all, strip: !views.is_empty(), first_reference, verify, slices, resolution })
+}
+
 /// Every basis sky's strip of the slices to render (None for a sky with
 /// none) and its fog slices to render, solved at the resolution of
 /// `quality` and the sky's preset. With `references` (the cache and the
 /// fog's ceiling), a sky that renders anything also renders `sky lut
 /// verify`'s default references in the same solution into the cache
 /// (`references`), unless they are there.
+///
+/// The forecast: first one wavelength of every sky (its middle band
+/// node), timed (the "solver's pilots"); each sky's other wavelengths are
+/// forecast to cost what its pilot did. Then sky after sky the rest, its
+/// pilot's light kept.
 pub(super) fn render_strips(
     plan: &Plan,
     sessions: &[Option<Session>],
@@ -96,11 +167,49 @@ pub(super) fn render_strips(
     tracker: &Mutex<Tracker>,
     cancel: &AtomicBool,
 ) -> Result<(Vec<Option<StripOutcome>>, Vec<FogRenders>), BakeError> {
+    let jobs: Vec<Option<SkyJob>> = (0..plan.skies.len())
+        .map(|k| sessions[k].as_ref().and_then(|_| sky_job(plan, k, quality, references)))
+        .collect();
+    let mut staged = Vec::new();
+    for (job, session) in jobs.iter().zip(sessions) {
+        staged.push(match (job, session) {
+            (Some(j), Some(s)) => Some(
+                Staged::new(&s.scene, &j.all, &j.resolution)
+                    .map_err(|error| BakeError::Solver { sky: j.sky.clone(), error })?,
+            ),
+            _ => None,
+        });
+    }
+    let threads = rayon::current_num_threads() as f64;
+    // The pilots.
+    let start = Instant::now();
+    tracker.lock().unwrap().planning = true;
+    let count = staged.iter().flatten().count();
+    let mut pilots: Vec<Option<(WavelengthId, SolvedWavelength, f64)>> = Vec::new();
+    for (job, stage) in jobs.iter().zip(&staged) {
+        let (Some(job), Some(stage)) = (job, stage) else {
+            pilots.push(None);
+            continue;
+        };
+        if cancel.load(Ordering::SeqCst) {
+            return Err(BakeError::Cancelled);
+        }
+        let ids = stage.wavelengths();
+        let id = ids[ids.len() / 2];
+        let t0 = Instant::now();
+        let light = stage.solve(id);
+        let core_seconds = t0.elapsed().as_secs_f64() * threads;
+        let forecast = core_seconds * (ids.len() - 1) as f64;
+        pilots.push(Some((id, light, forecast)));
+        let done = pilots.iter().flatten().count();
+        let t = tracker.lock().unwrap();
+        t.planned_one("solver's pilots", start, (&job.sky, 0, false), (done, count), Some(forecast));
+    }
+    let total: f64 = pilots.iter().flatten().map(|p| p.2).sum();
+    tracker.lock().unwrap().forecast("solver's pilots", start, (total, 0), 0);
     let (mut strips, mut fogs) = (Vec::new(), Vec::new());
-    for (k, p) in plan.skies.iter().enumerate() {
-        let to_render = p.to_render();
-        let fog = &plan.fog[k];
-        let Some(session) = sessions[k].as_ref().filter(|_| !to_render.is_empty() || !fog.is_empty()) else {
+    for (k, ((job, stage), pilot)) in jobs.iter().zip(&staged).zip(pilots).enumerate() {
+        let (Some(job), Some(stage), Some((pilot, pilot_light, forecast))) = (job, stage, pilot) else {
             strips.push(None);
             fogs.push(FogRenders::new());
             continue;
@@ -108,75 +217,66 @@ pub(super) fn render_strips(
         if cancel.load(Ordering::SeqCst) {
             return Err(BakeError::Cancelled);
         }
-        let sky = p.out.sky.name.clone();
-        let views: Vec<&View> = to_render.iter().map(|&i| &p.views[i].as_ref().expect("to render").0).collect();
-        let mut all: Vec<View> = if views.is_empty() { Vec::new() } else { vec![strip_view(&views)] };
-        all.extend(fog.iter().map(|f| f.view.clone()));
-        // `sky lut verify`'s references, if not in the cache: rendered
-        // after the slices, priced in with them.
-        let verify = references.and_then(|(cache, ceiling_km)| {
-            let o = &p.out;
-            let refs = ReferenceViews::new(
-                (o.radius_km, o.top_km, o.sky.altitude_m),
-                (super::references::DIRECTIONS, &super::references::CENTRE_SLICES),
-                (1, 1),
-                Some(ceiling_km),
-            );
-            let key = refs.key(&o.atmosphere_hash, &o.spectral, &deterministic_tag(quality, &o.sampling));
-            let views = refs.all();
-            super::references::cached(cache, &key, &views).is_none().then_some((cache, key, views))
-        });
-        let first_reference = all.len();
-        if let Some((_, _, views)) = &verify {
-            all.extend(views.iter().cloned());
-        }
-        let mut slices: Vec<(String, usize, u64)> = Vec::new();
-        for (&i, v) in to_render.iter().zip(&views) {
-            slices.push((sky.clone(), i, (v.width * v.height) as u64));
-        }
-        for f in fog {
-            slices.push((format!("{sky} (fog)"), f.index, (f.view.width * f.view.height) as u64));
-        }
-        let texels: u64 = slices.iter().map(|s| s.2).sum();
-        let n = slices.len();
-        tracker.lock().unwrap().start_queue(QueueJob::new(slices, &vec![0.0; n]), 0);
-        let resolution = resolution(quality, &p.out.sampling);
-        let wavelengths = crate::transport::render::wavelengths_solved(&session.scene, &resolution);
-        let done = AtomicUsize::new(0);
-        let on_wavelength = || {
-            let d = done.fetch_add(1, Ordering::SeqCst) as u64 + 1;
-            let mut t = tracker.lock().unwrap();
-            let progress = t.progress(texels * d / wavelengths.max(1) as u64, None);
-            t.emit(BakeEvent::Progress(progress));
-        };
-        let start = Instant::now();
-        let mut images = render_views(&session.scene, &all, &resolution, &on_wavelength)
-            .map_err(|error| BakeError::Solver { sky: sky.clone(), error })?;
-        if let Some((cache, key, _)) = &verify {
-            super::references::store(cache, key, &images[first_reference..])?;
-        }
-        images.truncate(first_reference);
-        let mut images = images.into_iter();
-        // The cost shared by texels.
-        let core_seconds = start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64;
-        let per_texel = core_seconds / texels.max(1) as f64;
-        let strip = (!views.is_empty()).then(|| images.next().expect("the strip's image"));
-        strips.push(strip.map(|image| {
-            let core_seconds = per_texel * (image.width * image.height) as f64;
-            StripOutcome { image, core_seconds, resumed: 0 }
-        }));
-        fogs.push(
-            fog.iter()
-                .zip(images)
-                .map(|(f, image)| {
-                    let cost = per_texel * (image.width * image.height) as f64;
-                    (f.key.clone(), (image, cost))
-                })
-                .collect(),
-        );
-        let mut t = tracker.lock().unwrap();
-        t.texels_before += texels;
-        t.job = None;
+        let (strip, fog) = render_sky(job, stage, (pilot, pilot_light, forecast), &plan.fog[k], tracker)?;
+        strips.push(strip);
+        fogs.push(fog);
     }
     Ok((strips, fogs))
+}
+
+/// One basis sky's rest of `render_strips`: its wavelengths but the
+/// pilot's, solved in parallel, and its images.
+fn render_sky(
+    job: &SkyJob,
+    stage: &Staged,
+    (pilot, pilot_light, forecast): (WavelengthId, SolvedWavelength, f64),
+    fog: &[super::fog::FogTodo],
+    tracker: &Mutex<Tracker>,
+) -> Result<(Option<StripOutcome>, FogRenders), BakeError> {
+    let texels = job.texels();
+    let shares: Vec<f64> = job.slices.iter().map(|s| forecast * s.2 as f64 / texels.max(1) as f64).collect();
+    tracker.lock().unwrap().start_queue(QueueJob::new(job.slices.clone(), &shares), 0);
+    let rest: Vec<WavelengthId> = stage.wavelengths().into_iter().filter(|&id| id != pilot).collect();
+    let done = AtomicUsize::new(0);
+    let start = Instant::now();
+    let mut solved: Vec<(WavelengthId, SolvedWavelength)> = rest
+        .par_iter()
+        .map(|&id| {
+            let light = stage.solve(id);
+            let d = done.fetch_add(1, Ordering::SeqCst) as u64 + 1;
+            let mut t = tracker.lock().unwrap();
+            let progress = t.progress(texels * d / rest.len().max(1) as u64, None);
+            t.emit(BakeEvent::Progress(progress));
+            (id, light)
+        })
+        .collect();
+    solved.push((pilot, pilot_light));
+    let mut images = stage.finish(solved);
+    if let Some((cache, key)) = &job.verify {
+        super::references::store(cache, key, &images[job.first_reference..])?;
+    }
+    images.truncate(job.first_reference);
+    let mut images = images.into_iter();
+    // The cost shared by texels: the pilot's (a share of the forecast's)
+    // and the rest's.
+    let pilot_core_seconds = forecast / rest.len().max(1) as f64;
+    let core_seconds = start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64 + pilot_core_seconds;
+    let per_texel = core_seconds / texels.max(1) as f64;
+    let strip = job.strip.then(|| images.next().expect("the strip's image")).map(|image| {
+        let core_seconds = per_texel * (image.width * image.height) as f64;
+        StripOutcome { image, core_seconds, resumed: 0 }
+    });
+    let fogs = fog
+        .iter()
+        .zip(images)
+        .map(|(f, image)| {
+            let cost = per_texel * (image.width * image.height) as f64;
+            (f.key.clone(), (image, cost))
+        })
+        .collect();
+    let mut t = tracker.lock().unwrap();
+    t.texels_before += texels;
+    t.forecast_done += forecast;
+    t.job = None;
+    Ok((strip, fogs))
 }

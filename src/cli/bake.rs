@@ -142,7 +142,9 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
                 } else {
                     String::new()
                 };
-                say(format!("sky bake-luts: the {from} forecast {samples} samples, {:.3} core-hours ({:.3} core-hours spent on them{saved})", core_seconds / 3600.0, planning_core_seconds / 3600.0));
+                // The solver's pilots forecast no samples.
+                let samples = if *samples > 0 { format!("{samples} samples, ") } else { String::new() };
+                say(format!("sky bake-luts: the {from} forecast {samples}{:.3} core-hours ({:.3} core-hours spent on them{saved})", core_seconds / 3600.0, planning_core_seconds / 3600.0));
             }
             BakeEvent::Planning { from, sky, index, fog, done, total, elapsed_s, eta_s, .. } => {
                 let what = format!(

@@ -28,7 +28,6 @@ use super::layers::Grading;
 use super::light::{between_nodes, spectral_nodes, transpose, PixelRay, Solved, Wavelength, PIXEL_RAYS};
 use crate::atmosphere::Geometry;
 use crate::directions::Camera;
-use crate::render::medium::Spectral;
 use crate::render::single::{xyz_of, SingleScattering};
 use crate::render::{Image, PixelResult, Scene, View};
 use glam::DVec3;
@@ -154,60 +153,128 @@ pub fn render_views(
     resolution: &Resolution,
     on_wavelength: &(dyn Fn() + Sync),
 ) -> Result<Vec<Image>, Unsupported> {
-    views.iter().try_for_each(check)?;
-    // (view, first column, part) of every part of every view.
-    let parts: Vec<(usize, usize, View)> =
-        views.iter().enumerate().flat_map(|(v, view)| view.parts().into_iter().map(move |(x, p)| (v, x, p))).collect();
-    let suns_rad: Vec<f64> = parts.iter().map(|(_, _, p)| sun_zenith_rad(p)).collect();
-    let rays: Vec<Vec<PixelRay>> = parts.iter().map(|(_, _, p)| rays_up(scene, p)).collect();
-    // A LUT slice always takes the tables: a bake's strip makes them for
-    // all its slices at once (`Columns::rays_for_suns`), cheaper there than
-    // each texel's own ray even for the demo's 8 x 32 cloudy slices (a
-    // cloudy draft's tables 9 s a wavelength against 14 s), and a slice is
-    // then the same bytes rendered alone or in a strip. Fog always takes
-    // each pixel's own ray, to its own reach.
-    let pixel_rays: Vec<Option<&[PixelRay]>> = parts
-        .iter()
-        .zip(&rays)
-        .map(|((_, _, p), r)| {
-            let own = p.fog.is_some() || (r.len() <= resolution.pixel_rays && !matches!(p.camera, Camera::Lut { .. }));
-            own.then_some(&r[..])
+    let staged = Staged::new(scene, views, resolution)?;
+    let solved: Vec<(WavelengthId, SolvedWavelength)> = staged
+        .wavelengths()
+        .into_par_iter()
+        .map(|id| {
+            let w = staged.solve(id);
+            on_wavelength();
+            (id, w)
         })
         .collect();
-    // Each wavelength solved once for the suns of every part (the slices
-    // of a strip share their columns), then read for each part's pixels.
-    let solve = |optics: &[Spectral], nodes: &[usize]| -> Vec<Vec<Wavelength>> {
-        let solved: Vec<Vec<Wavelength>> = nodes
-            .par_iter()
-            .map(|&i| {
-                let w = Solved::new(scene, &optics[i], &suns_rad, resolution).wavelengths(&suns_rad, &pixel_rays);
-                on_wavelength();
-                w
+    Ok(staged.finish(solved))
+}
+
+/// One wavelength `render_views` solves: a band node (its index among the
+/// scene's bands; `spectral_nodes`) or a spectral line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum WavelengthId {
+    Band(usize),
+    Line(usize),
+}
+
+/// One wavelength's light for every part of a [`Staged`] render.
+pub struct SolvedWavelength {
+    light: Vec<Wavelength>,
+}
+
+/// `render_views` in stages, for a caller that orders the wavelengths'
+/// solutions itself (a deterministic bake solves one of every basis sky
+/// first, for its forecast): `new`, `solve` each of `wavelengths` in any
+/// order and on any thread, `finish` with all of them. The images are
+/// `render_views`' own.
+pub struct Staged<'a> {
+    scene: &'a Scene,
+    views: &'a [View],
+    resolution: Resolution,
+    /// (view, first column, part) of every part of every view.
+    parts: Vec<(usize, usize, View)>,
+    suns_rad: Vec<f64>,
+    rays: Vec<Vec<PixelRay>>,
+    /// Whether each part takes its pixels' own rays (else the table).
+    own_rays: Vec<bool>,
+    band_nodes: Vec<usize>,
+}
+
+impl<'a> Staged<'a> {
+    pub fn new(scene: &'a Scene, views: &'a [View], resolution: &Resolution) -> Result<Staged<'a>, Unsupported> {
+        views.iter().try_for_each(check)?;
+        let parts: Vec<(usize, usize, View)> = views
+            .iter()
+            .enumerate()
+            .flat_map(|(v, view)| view.parts().into_iter().map(move |(x, p)| (v, x, p)))
+            .collect();
+        let suns_rad: Vec<f64> = parts.iter().map(|(_, _, p)| sun_zenith_rad(p)).collect();
+        let rays: Vec<Vec<PixelRay>> = parts.iter().map(|(_, _, p)| rays_up(scene, p)).collect();
+        // A LUT slice always takes the tables: a bake's strip makes them for
+        // all its slices at once (`Columns::rays_for_suns`), cheaper there
+        // than each texel's own ray even for the demo's 8 x 32 cloudy slices
+        // (a cloudy draft's tables 9 s a wavelength against 14 s), and a
+        // slice is then the same bytes rendered alone or in a strip. Fog
+        // always takes each pixel's own ray, to its own reach.
+        let own_rays = parts
+            .iter()
+            .zip(&rays)
+            .map(|((_, _, p), r)| {
+                p.fog.is_some() || (r.len() <= resolution.pixel_rays && !matches!(p.camera, Camera::Lut { .. }))
             })
             .collect();
-        transpose(between_nodes(scene, optics, nodes, solved, &suns_rad, resolution), parts.len())
-    };
-    let band_nodes = spectral_nodes(&scene.band_optics, resolution.ms_step_nm);
-    let every_line: Vec<usize> = (0..scene.line_optics.len()).collect();
-    let (bands, lines) = (solve(&scene.band_optics, &band_nodes), solve(&scene.line_optics, &every_line));
-    let mut pixels: Vec<Vec<Option<PixelResult>>> = views.iter().map(|v| vec![None; v.width * v.height]).collect();
-    for (((v, first, part), bands), lines) in parts.iter().zip(bands).zip(lines) {
-        let part_pixels = render_part(scene, part, &bands, &lines);
-        for (i, p) in part_pixels.into_iter().enumerate() {
-            let (x, y) = (first + i % part.width, i / part.width);
-            pixels[*v][y * views[*v].width + x] = Some(p);
-        }
+        let band_nodes = spectral_nodes(&scene.band_optics, resolution.ms_step_nm);
+        Ok(Staged { scene, views, resolution: *resolution, parts, suns_rad, rays, own_rays, band_nodes })
     }
-    let images = views
-        .iter()
-        .zip(pixels)
-        .map(|(view, pixels)| Image {
-            width: view.width,
-            height: view.height,
-            pixels: pixels.into_iter().map(|p| p.expect("the parts cover the view")).collect(),
-        })
-        .collect();
-    Ok(images)
+
+    /// The wavelengths to solve: the bands' nodes, then every spectral line.
+    pub fn wavelengths(&self) -> Vec<WavelengthId> {
+        let bands = self.band_nodes.iter().map(|&i| WavelengthId::Band(i));
+        bands.chain((0..self.scene.line_optics.len()).map(WavelengthId::Line)).collect()
+    }
+
+    /// One wavelength solved once for the suns of every part (the slices
+    /// of a strip share their columns) and read for each part's pixels.
+    pub fn solve(&self, id: WavelengthId) -> SolvedWavelength {
+        let optics = match id {
+            WavelengthId::Band(i) => &self.scene.band_optics[i],
+            WavelengthId::Line(i) => &self.scene.line_optics[i],
+        };
+        let pixel_rays: Vec<Option<&[PixelRay]>> =
+            self.rays.iter().zip(&self.own_rays).map(|(r, &own)| own.then_some(&r[..])).collect();
+        let light =
+            Solved::new(self.scene, optics, &self.suns_rad, &self.resolution).wavelengths(&self.suns_rad, &pixel_rays);
+        SolvedWavelength { light }
+    }
+
+    /// The images from every wavelength of `wavelengths` solved.
+    pub fn finish(&self, mut solved: Vec<(WavelengthId, SolvedWavelength)>) -> Vec<Image> {
+        solved.sort_by_key(|s| s.0);
+        let (bands, lines): (Vec<_>, Vec<_>) = solved.into_iter().partition(|s| matches!(s.0, WavelengthId::Band(_)));
+        assert_eq!(bands.len(), self.band_nodes.len(), "every band node solved");
+        assert_eq!(lines.len(), self.scene.line_optics.len(), "every spectral line solved");
+        let (scene, suns, parts) = (self.scene, &self.suns_rad, self.parts.len());
+        let light = |s: Vec<(WavelengthId, SolvedWavelength)>| s.into_iter().map(|s| s.1.light).collect();
+        let every_line: Vec<usize> = (0..scene.line_optics.len()).collect();
+        let bands = between_nodes(scene, &scene.band_optics, &self.band_nodes, light(bands), suns, &self.resolution);
+        let lines = between_nodes(scene, &scene.line_optics, &every_line, light(lines), suns, &self.resolution);
+        let (bands, lines) = (transpose(bands, parts), transpose(lines, parts));
+        let views = self.views;
+        let mut pixels: Vec<Vec<Option<PixelResult>>> = views.iter().map(|v| vec![None; v.width * v.height]).collect();
+        for (((v, first, part), bands), lines) in self.parts.iter().zip(bands).zip(lines) {
+            let part_pixels = render_part(scene, part, &bands, &lines);
+            for (i, p) in part_pixels.into_iter().enumerate() {
+                let (x, y) = (first + i % part.width, i / part.width);
+                pixels[*v][y * views[*v].width + x] = Some(p);
+            }
+        }
+        views
+            .iter()
+            .zip(pixels)
+            .map(|(view, pixels)| Image {
+                width: view.width,
+                height: view.height,
+                pixels: pixels.into_iter().map(|p| p.expect("the parts cover the view")).collect(),
+            })
+            .collect()
+    }
 }
 
 /// The sun's zenith angle over the observer of `view`, radians.
@@ -468,6 +535,7 @@ mod tests {
     /// `render_views` (`sky lut verify`'s references) solves once for the
     /// suns of several views, each few enough pixels to take its own rays:
     /// each image is the view rendered alone.
+    /// (And a render in stages is the same render.)
     #[test]
     fn views_rendered_together_are_each_as_rendered_alone() {
         let scene = clear_scene();
@@ -487,5 +555,29 @@ mod tests {
             assert_eq!(xyz(&alone), xyz(image), "sun {}", view.sun_zenith_deg);
             assert!(image.pixels.iter().all(|p| p.xyz[1] > 0.0), "sun {}", view.sun_zenith_deg);
         }
+        // In stages, the wavelengths solved in another order (the middle
+        // one first, as a bake's pilot; a spectral line among them): the
+        // same images.
+        let scene = Scene::new(
+            &Atmosphere::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("atmospheres/clear.toml"))
+                .unwrap(),
+            &crate::render::SpectralSettings {
+                band_nm: 100.0,
+                wavelength_sampling: crate::render::WavelengthSampling::Hero,
+                spectral_nm: vec![550.0],
+                xyz: true,
+            },
+            &MieCache::shared_by_tests(),
+            &|| {},
+        );
+        let together = render_views(&scene, &views, &resolution, &|| {}).unwrap();
+        let staged = Staged::new(&scene, &views, &resolution).unwrap();
+        let mut ids = staged.wavelengths();
+        assert!(ids.len() >= 3 && ids.contains(&WavelengthId::Line(0)), "{ids:?}");
+        let middle = ids.len() / 2;
+        ids.swap(0, middle);
+        ids.reverse();
+        let solved = ids.into_iter().map(|id| (id, staged.solve(id))).collect();
+        assert_eq!(staged.finish(solved), together);
     }
 }
