@@ -6,7 +6,10 @@
 //! table cosines, stops, sun-angle columns and streams each doubled (and
 //! the stopping tolerance tightened tenfold), one at a time.
 //!
-//! cargo run --release --example spherical_resolution -- ATMOSPHERE SUN_ZENITH_DEG [WAVELENGTH_NM] [STREAMS]
+//! cargo run --release --example spherical_resolution -- ATMOSPHERE SUN_ZENITH_DEG [WAVELENGTH_NM] [STREAMS] [VARIANTS]
+//!
+//! VARIANTS, a comma-separated list of the variants' names (`streams x 2`,
+//! `streams x 4`, `levels x 2`, ...), runs only those beside the default.
 
 use sky::atmosphere::Atmosphere;
 use sky::mie::MieCache;
@@ -18,7 +21,7 @@ use sky::transport::spherical::{solve, Settings};
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: spherical_resolution ATMOSPHERE SUN_ZENITH_DEG [WAVELENGTH_NM] [STREAMS]");
+        eprintln!("usage: spherical_resolution ATMOSPHERE SUN_ZENITH_DEG [WAVELENGTH_NM] [STREAMS] [VARIANTS]");
         std::process::exit(2);
     }
     let number = |i: usize, default: f64, what: &str| -> f64 {
@@ -40,12 +43,12 @@ fn main() {
     let optics = medium.spectral(&atm, wavelength_nm, 1.0, 0.3, &MieCache::from_env());
     let lmax = 2 * streams;
     let layers = Layers::new(&medium, &optics, lmax, &Grading::default());
-    let layers_twice = Layers::new(&medium, &optics, 2 * lmax, &Grading::default());
+    let layers_of = |n: usize| Layers::new(&medium, &optics, 2 * n, &Grading::default());
     let sun = sun_deg.to_radians();
     let base = Settings::default();
     let mut finer_levels = base.levels_km.clone();
     finer_levels.extend(base.levels_km.windows(2).filter(|w| w[1] < 1e3).map(|w| 0.5 * (w[0] + w[1])));
-    let variants: Vec<(&str, Settings, f64, usize)> = vec![
+    let mut variants: Vec<(&str, Settings, f64, usize)> = vec![
         ("default", base.clone(), 1.0, streams),
         ("levels x 2", Settings { levels_km: finer_levels, ..base.clone() }, 1.0, streams),
         ("modes x 2", Settings { modes: 2 * base.modes, ..base.clone() }, 1.0, streams),
@@ -60,12 +63,26 @@ fn main() {
         ("tolerance / 10", Settings { tolerance: 0.1 * base.tolerance, max_passes: 30, ..base.clone() }, 1.0, streams),
         ("columns / 2", base.clone(), 0.5, streams),
         ("streams x 2", base.clone(), 1.0, 2 * streams),
+        ("streams x 4", base.clone(), 1.0, 4 * streams),
     ];
+    match args.get(5) {
+        Some(list) => {
+            let wanted: Vec<&str> = list.split(',').map(str::trim).collect();
+            variants.retain(|v| v.0 == "default" || wanted.contains(&v.0));
+        }
+        None => variants.retain(|v| v.0 != "streams x 4"),
+    }
     let phis = [0.0, 0.5 * std::f64::consts::PI, std::f64::consts::PI];
     let mus = [1.0, 0.5, 0.17, 0.035];
     let mut answers: Vec<Vec<f64>> = Vec::new();
     for (name, settings, step_deg, n) in &variants {
-        let l = if *n == streams { &layers } else { &layers_twice };
+        let other;
+        let l = if *n == streams {
+            &layers
+        } else {
+            other = layers_of(*n);
+            &other
+        };
         let t0 = std::time::Instant::now();
         let zenith = grid_reaches(l, sun, step_deg.to_radians(), 2.0);
         let (columns, report) = solve(l, *n, zenith, settings);
