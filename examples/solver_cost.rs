@@ -90,13 +90,14 @@ fn main() {
     );
     // The answer, to compare settings: the ground's irradiance and the
     // diffuse radiance at the zenith and 5.7° above the horizon toward and
-    // away from the sun, per unit solar irradiance.
+    // away from the sun, per unit solar irradiance (every digit: a change
+    // meant to leave the answer as it was can be checked bit for bit).
     for sun_deg in [90.0f64, 93.0, 96.0, 99.0] {
         let sun = sun_deg.to_radians();
         let zenith = twilight_columns.rays(sun, 1.0, &[0.0])[0];
         let low = twilight_columns.rays(sun, 0.1, &[0.0, std::f64::consts::PI]);
         println!(
-            "sun {sun_deg}: ground irradiance {:.5e}, zenith {:.5e}, low toward {:.5e} away {:.5e}",
+            "sun {sun_deg}: ground irradiance {:?}, zenith {:?}, low toward {:?} away {:?}",
             twilight_columns.ground_irradiance_at(sun),
             zenith,
             low[0],

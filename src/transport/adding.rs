@@ -410,10 +410,18 @@ pub(super) fn source(l: &Scaled, m: usize, lmax: usize, lam: &[f64], a: &[f64]) 
 /// `j_top` and `j_base`, seen from below its base:
 /// ∫₀ˣ J(s) e^{−s} ds with s the path from the base.
 pub(super) fn through_layer(j_top: f64, j_base: f64, x: f64) -> f64 {
+    let (base, top) = through_layer_weights(x);
+    j_base * base + j_top * top
+}
+
+/// `through_layer`'s weights of the source at the base and at the top
+/// of a layer of optical thickness `x`: (1 − q, q − e^{−x}) with
+/// q = (1 − e^{−x}) / x.
+pub(super) fn through_layer_weights(x: f64) -> (f64, f64) {
     let e = (-x).exp();
     // (1 − e^{−x}) / x, by its series for thin layers.
     let q = if x < 1e-5 { 1.0 - 0.5 * x + x * x / 6.0 } else { -(-x).exp_m1() / x };
-    j_base * (1.0 - q) + j_top * (q - e)
+    (1.0 - q, q - e)
 }
 
 /// The mode-m radiance of the light scattered two or more times at each

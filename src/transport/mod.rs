@@ -28,3 +28,4 @@ pub mod operator;
 pub mod render;
 pub mod shell_rays;
 pub mod spherical;
+mod spherical_table;

@@ -47,12 +47,12 @@
 //! Modes of azimuth above `Settings::modes` keep the columns' values.
 
 use super::accelerate::Accelerator;
-use super::adding::{source_coefficients, through_layer, Scaled};
+use super::adding::{source_coefficients, Scaled};
 use super::columns::{bracket, interfaces_km, log_lerp, Columns, Solution};
 use super::layers::Layers;
-use super::legendre::{legendre_all, normalised_associated};
 use super::operator::Streams;
 use super::shell_rays::{stops, through_layer_log, trace, At, Beam, Ray};
+use super::spherical_table::{AlongRay, Phases, Table};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
@@ -189,107 +189,6 @@ fn node_levels(z: &[f64], sigma: &[f64], targets_km: &[f64]) -> Vec<usize> {
     levels
 }
 
-/// The multiply scattered light's sources of every column, per interface
-/// side, Fourier mode m ≤ M and view cosine on a uniform grid, −1 to 1:
-/// `get(c, i, side, m, u)`.
-struct Table {
-    interfaces: usize,
-    modes: usize,
-    cosines: usize,
-    values: Vec<f32>,
-}
-
-impl Table {
-    fn index(&self, c: usize, i: usize, side: usize, m: usize) -> usize {
-        (((c * self.interfaces + i) * 2 + side) * self.modes + m) * self.cosines
-    }
-
-    /// Σ_m J^m(u) cos(m φ) at interface i, side `side` of column c.
-    fn value(&self, c: usize, i: usize, side: usize, u: f64, cos_phi: f64) -> f64 {
-        let x = (u + 1.0) * 0.5 * (self.cosines - 1) as f64;
-        let k = (x.floor() as usize).min(self.cosines - 2);
-        let w = (x - k as f64) as f32;
-        let base = self.index(c, i, side, 0) + k;
-        let (mut prev, mut cos_m) = (cos_phi, 1.0);
-        let mut sum = 0.0;
-        for m in 0..self.modes {
-            let at = base + m * self.cosines;
-            let v = self.values[at] * (1.0 - w) + self.values[at + 1] * w;
-            sum += v as f64 * cos_m;
-            (prev, cos_m) = (cos_m, 2.0 * cos_phi * cos_m - prev);
-        }
-        sum
-    }
-}
-
-impl Table {
-    /// The table of the current coefficients of `solution`: modes below
-    /// `modes`, `cosines` view cosines.
-    fn new(solution: &Solution, modes: usize, cosines: usize) -> Table {
-        let (scaled, lmax) = (&solution.scaled, solution.s.lmax);
-        let nl = scaled.len();
-        let grid_u: Vec<f64> = (0..cosines).map(|k| -1.0 + 2.0 * k as f64 / (cosines - 1) as f64).collect();
-        let lam_grid: Vec<Vec<Vec<f64>>> =
-            (0..modes).map(|m| grid_u.iter().map(|&u| normalised_associated(lmax, m, u)).collect()).collect();
-        let mut table = Table {
-            interfaces: nl + 1,
-            modes,
-            cosines,
-            values: vec![0.0; solution.a.len() * (nl + 1) * 2 * modes * cosines],
-        };
-        let block = (nl + 1) * 2 * modes * cosines;
-        table.values.par_chunks_mut(block).enumerate().for_each(|(c, out)| {
-            for i in 0..=nl {
-                for side in 0..2 {
-                    let k = if side == 0 { i.checked_sub(1) } else { (i < nl).then_some(i) };
-                    let Some(k) = k else { continue };
-                    let l: &Scaled = &scaled[k];
-                    for m in 0..modes {
-                        let w = super::columns::weigh(l, lmax, m, &solution.a[c][m][i]);
-                        let at = ((i * 2 + side) * modes + m) * cosines;
-                        for (q, lam) in lam_grid[m].iter().enumerate() {
-                            out[at + q] = (m..=lmax).map(|j| w[j] * lam[j]).sum::<f64>() as f32;
-                        }
-                    }
-                }
-            }
-        });
-        table
-    }
-}
-
-/// Each layer's scaled phase function on a grid of cos Θ, −1 to 1.
-struct Phases {
-    nodes: Vec<Vec<f64>>,
-}
-
-impl Phases {
-    const NODES: usize = 4001;
-
-    fn new(scaled: &[Scaled], lmax: usize) -> Phases {
-        let nodes = scaled
-            .iter()
-            .map(|l| {
-                (0..Self::NODES)
-                    .map(|k| {
-                        let p = legendre_all(lmax, -1.0 + 2.0 * k as f64 / (Self::NODES - 1) as f64);
-                        (0..l.chi.len()).map(|j| (2 * j + 1) as f64 * l.chi[j] * p[j]).sum()
-                    })
-                    .collect()
-            })
-            .collect();
-        Phases { nodes }
-    }
-
-    /// Layer k's phase function at cos Θ.
-    fn at(&self, k: usize, cos_scattering: f64) -> f64 {
-        let x = (cos_scattering + 1.0) * 0.5 * (Self::NODES - 1) as f64;
-        let j = (x.floor() as usize).min(Self::NODES - 2);
-        let w = x - j as f64;
-        self.nodes[k][j] * (1.0 - w) + self.nodes[k][j + 1] * w
-    }
-}
-
 /// What one pass of the iteration reads: the sources' table, the beam,
 /// the layers, the columns' sun angles and the ground's diffuse
 /// irradiance in each.
@@ -308,22 +207,28 @@ impl Pass<'_> {
     fn ground_at(&self, zenith: f64) -> f64 {
         let (c, w) = bracket(self.zenith_rad, zenith);
         let d = if w == 0.0 { self.diffuse[c] } else { self.diffuse[c] * (1.0 - w) + self.diffuse[c + 1] * w };
-        d + zenith.cos().max(0.0) * self.beam.at(self.table.interfaces - 1, zenith)
+        d + zenith.cos().max(0.0) * self.beam.at(self.scaled.len(), zenith)
     }
 
-    /// The radiance arriving at the start of `ray` (zenith cosine `u0`)
-    /// from azimuth `cos_phi` (from the sun, whose zenith angle is
-    /// (cos, sin) `sun` at the start); `at_points` is scratch.
-    fn radiance(&self, ray: &Ray, u0: f64, sun: (f64, f64), cos_phi: f64, at_points: &mut Vec<(f64, f64)>) -> f64 {
+    /// The geometry of `ray` (zenith cosine `u0` at its start) seen from
+    /// azimuth `cos_phi` from the sun, whose zenith angle is (cos, sin)
+    /// `sun` at the start: the cosine of the scattering angle, and in
+    /// `at_points` each point's sun zenith (and its cosine).
+    fn geometry(ray: &Ray, u0: f64, sun: (f64, f64), cos_phi: f64, at_points: &mut Vec<(f64, f64)>) -> f64 {
         let (cos_c, sin_c) = sun;
         let sin_v = (1.0 - u0 * u0).max(0.0).sqrt();
-        let cos_scattering = (u0 * cos_c + sin_v * sin_c * cos_phi).clamp(-1.0, 1.0);
-        // Per point: its sun zenith (and its cosine).
         at_points.clear();
         for p in &ray.points {
             let cos_s = (p.cos_arc * cos_c + p.sin_arc * sin_c * cos_phi).clamp(-1.0, 1.0);
             at_points.push((cos_s.acos(), cos_s));
         }
+        (u0 * cos_c + sin_v * sin_c * cos_phi).clamp(-1.0, 1.0)
+    }
+
+    /// The light scattered once along `ray` toward its start (`geometry`'s
+    /// scattering cosine and points), layer by layer, the beam exponential
+    /// across each. The same in every pass.
+    fn single(&self, ray: &Ray, cos_scattering: f64, at_points: &[(f64, f64)]) -> f64 {
         let beam_at = |pi: usize| -> f64 {
             let zenith = at_points[pi].0;
             match ray.points[pi].at {
@@ -333,8 +238,6 @@ impl Pass<'_> {
                     .exp(),
             }
         };
-        // The single scattering, layer by layer, the beam exponential
-        // across each.
         let (mut radiance, mut before) = (0.0f64, 0.0f64);
         let mut t_near = beam_at(0);
         for (q, &(k, tau)) in ray.steps.iter().enumerate() {
@@ -346,11 +249,20 @@ impl Pass<'_> {
             radiance += f * through_layer_log(t_far, t_near, tau) * (-before).exp();
             (before, t_near) = (before + tau, t_far);
         }
-        // The multiply scattered light's source at stop `pi`, in layer k
-        // next to it.
-        let multiple = |pi: usize, k: usize| -> f64 {
-            let (zenith, cos_s) = at_points[pi];
-            let u = ray.points[pi].u;
+        radiance
+    }
+
+    /// The radiance arriving at the start of `ray`: `single` (its light
+    /// scattered once), plus that of the multiply scattered light's
+    /// sources in this pass's table (`along`: at the ray's stops) and of
+    /// the ground, with `geometry`'s scattering cosine and points.
+    fn radiance(&self, ray: &Ray, along: &AlongRay, single: f64, cos_scattering: f64, at_points: &[(f64, f64)]) -> f64 {
+        let mut radiance = single;
+        // Where stop `q` reads the columns: the bracketing columns and the
+        // azimuth from the local sun.
+        let geometry = |q: usize| -> (usize, f64, f64) {
+            let (zenith, cos_s) = at_points[ray.stops[q]];
+            let u = ray.points[ray.stops[q]].u;
             let sin_s = (1.0 - cos_s * cos_s).max(0.0).sqrt();
             let sin_u = (1.0 - u * u).max(0.0).sqrt();
             let cos_local = if sin_u * sin_s > 1e-12 {
@@ -359,27 +271,40 @@ impl Pass<'_> {
                 1.0
             };
             let (cc, w) = bracket(self.zenith_rad, zenith);
-            let one = |i: usize, side: usize| -> f64 {
-                let a = self.table.value(cc, i, side, u, cos_local);
+            (cc, w, cos_local)
+        };
+        // The multiply scattered light's source at stop `q` (`geometry`
+        // `g`), in layer k next to it.
+        let multiple = |q: usize, (cc, w, cos_local): (usize, f64, f64), k: usize| -> f64 {
+            let pi = ray.stops[q];
+            let one = |slot: usize| -> f64 {
+                let (a, b) = along.values(q, slot, cc, cos_local, w != 0.0);
                 if w == 0.0 {
                     a
                 } else {
-                    log_lerp(a, self.table.value(cc + 1, i, side, u, cos_local), w)
+                    log_lerp(a, b, w)
                 }
             };
             match ray.points[pi].at {
-                At::Interface(i) => one(i, if k + 1 == i { 0 } else { 1 }),
-                At::Inside(k, f) => one(k, 1) * (1.0 - f) + one(k + 1, 0) * f,
+                At::Interface(i) => one(if k + 1 == i { 0 } else { 1 }),
+                At::Inside(_, f) => one(0) * (1.0 - f) + one(1) * f,
             }
         };
-        before = 0.0;
-        for (q, &(k_near, k_far, tau)) in ray.segments.iter().enumerate() {
+        let mut before = 0.0f64;
+        let mut g_near = if ray.segments.is_empty() { (0, 0.0, 1.0) } else { geometry(0) };
+        for (q, (&(k_near, k_far, tau), &(base, top, attenuation))) in
+            ray.segments.iter().zip(along.segments()).enumerate()
+        {
             if before > 40.0 {
                 break;
             }
-            let (far, near) = (multiple(ray.stops[q + 1], k_far), multiple(ray.stops[q], k_near));
-            radiance += through_layer(far, near, tau) * (-before).exp();
+            let g_far = geometry(q + 1);
+            let (far, near) = (multiple(q + 1, g_far, k_far), multiple(q, g_near, k_near));
+            // `through_layer(far, near, tau) * (-before).exp()`, its
+            // weights the ray's own.
+            radiance += (near * base + far * top) * attenuation;
             before += tau;
+            g_near = g_far;
         }
         if ray.ground && self.albedo > 0.0 {
             let zenith = at_points.last().map_or(0.0, |p| p.0);
@@ -388,41 +313,105 @@ impl Pass<'_> {
         radiance
     }
 
-    /// Column c's node radiances as Fourier modes of azimuth (trapezoid
-    /// rule on `phis`, 0..π): `[level][m]` = (down, up) per stream;
-    /// `rays[level]`: the streams looking up (cosines `dirs`), then down.
-    fn node_modes(&self, c: usize, rays: &[Vec<Ray>], dirs: &[f64], phis: &[f64], modes: usize) -> NodeModes {
-        let n = dirs.len() / 2;
-        let kk = phis.len() - 1;
+    /// Column c's light scattered once along its node rays (`rays[level]`
+    /// of cosines `dirs`), at each of `phis`: `[(level · dirs + j) · phis
+    /// + k]`.
+    fn singles(&self, c: usize, rays: &[Vec<Ray>], dirs: &[f64], phis: &[f64]) -> Vec<f64> {
         let sun = (self.zenith_rad[c].cos(), self.zenith_rad[c].sin());
-        let mut out = vec![vec![(vec![0.0; n], vec![0.0; n]); modes]; rays.len()];
         let mut at_points = Vec::new();
-        for (lv, level_rays) in rays.iter().enumerate() {
-            for (j, ray) in level_rays.iter().enumerate() {
-                let along_phi: Vec<f64> =
-                    phis.iter().map(|phi| self.radiance(ray, dirs[j], sun, phi.cos(), &mut at_points)).collect();
-                for m in 0..modes {
-                    let sum: f64 = (0..=kk)
-                        .map(|kp| {
-                            let end = if kp == 0 || kp == kk { 0.5 } else { 1.0 };
-                            end * along_phi[kp] * (m as f64 * phis[kp]).cos()
-                        })
-                        .sum();
-                    let value = sum * if m == 0 { 1.0 } else { 2.0 } / kk as f64;
-                    if j < n {
-                        out[lv][m].0[j] = value;
-                    } else {
-                        out[lv][m].1[j - n] = value;
-                    }
+        let mut out = Vec::with_capacity(rays.len() * dirs.len() * phis.len());
+        for level_rays in rays {
+            for (ray, &u0) in level_rays.iter().zip(dirs) {
+                for phi in phis {
+                    let cos_scattering = Self::geometry(ray, u0, sun, phi.cos(), &mut at_points);
+                    out.push(self.single(ray, cos_scattering, &at_points));
                 }
             }
         }
         out
     }
+
+    /// Node ray `j` of level `lv` (`ray`, zenith cosine `u0`) in every
+    /// column: its radiance as Fourier modes of azimuth (trapezoid rule on
+    /// `phis`, 0..π), `[c][m]`; `singles[c]`: the columns' light scattered
+    /// once (`singles`), `first` the ray's first in them. Every column
+    /// reads the ray's stops from one `AlongRay` (the table at their view
+    /// cosines), which stays in the cache while the columns take turns.
+    fn ray_modes(
+        &self,
+        ray: &Ray,
+        u0: f64,
+        phis: &[f64],
+        modes: usize,
+        (singles, first): (&[Vec<f64>], usize),
+    ) -> Vec<Vec<f64>> {
+        let kk = phis.len() - 1;
+        let along = AlongRay::new(self.table, ray);
+        let mut at_points = Vec::new();
+        (0..self.zenith_rad.len())
+            .map(|c| {
+                let sun = (self.zenith_rad[c].cos(), self.zenith_rad[c].sin());
+                let along_phi: Vec<f64> = phis
+                    .iter()
+                    .zip(&singles[c][first..first + phis.len()])
+                    .map(|(phi, &single)| {
+                        let cos_scattering = Self::geometry(ray, u0, sun, phi.cos(), &mut at_points);
+                        self.radiance(ray, &along, single, cos_scattering, &at_points)
+                    })
+                    .collect();
+                (0..modes)
+                    .map(|m| {
+                        let sum: f64 = (0..=kk)
+                            .map(|kp| {
+                                let end = if kp == 0 || kp == kk { 0.5 } else { 1.0 };
+                                end * along_phi[kp] * (m as f64 * phis[kp]).cos()
+                            })
+                            .sum();
+                        sum * if m == 0 { 1.0 } else { 2.0 } / kk as f64
+                    })
+                    .collect()
+            })
+            .collect()
+    }
 }
 
 /// One column's node radiances by level and mode: (down, up) per stream.
 type NodeModes = Vec<Vec<(Vec<f64>, Vec<f64>)>>;
+
+/// Every column's node radiances (`NodeModes`) in this pass: the node rays
+/// (`rays[level]`: the streams looking up, cosines `dirs`, then down) in
+/// parallel, each in every column (`Pass::ray_modes`).
+fn node_modes(
+    pass: &Pass,
+    rays: &[Vec<Ray>],
+    (dirs, phis): (&[f64], &[f64]),
+    modes: usize,
+    singles: &[Vec<f64>],
+) -> Vec<NodeModes> {
+    let n = dirs.len() / 2;
+    let per_ray: Vec<Vec<Vec<f64>>> = (0..rays.len() * dirs.len())
+        .into_par_iter()
+        .map(|r| {
+            let (lv, j) = (r / dirs.len(), r % dirs.len());
+            pass.ray_modes(&rays[lv][j], dirs[j], phis, modes, (singles, r * phis.len()))
+        })
+        .collect();
+    let columns = pass.zenith_rad.len();
+    let mut out = vec![vec![vec![(vec![0.0; n], vec![0.0; n]); modes]; rays.len()]; columns];
+    for (r, by_column) in per_ray.into_iter().enumerate() {
+        let (lv, j) = (r / dirs.len(), r % dirs.len());
+        for (c, by_mode) in by_column.into_iter().enumerate() {
+            for (m, value) in by_mode.into_iter().enumerate() {
+                if j < n {
+                    out[c][lv][m].0[j] = value;
+                } else {
+                    out[c][lv][m].1[j - n] = value;
+                }
+            }
+        }
+    }
+    out
+}
 
 /// Coefficients `[c][m][interface or level][l]`.
 type Coefficients = Vec<Vec<Vec<Vec<f64>>>>;
@@ -531,6 +520,7 @@ pub(super) fn iterate(layers: &Layers, solution: &mut Solution, zenith_rad: &[f6
     let mut diffuse: Vec<f64> = solution.ground_irradiance.iter().zip(&direct).map(|(g, d)| g - d).collect();
     let accelerator =
         if settings.accelerate { Accelerator::new(s, scaled, layers.ground_albedo, &levels, &z) } else { None };
+    let mut singles: Option<Vec<Vec<f64>>> = None;
     for _pass in 0..settings.max_passes {
         let table = Table::new(solution, modes, settings.table_cosines.max(3));
         let pass = Pass {
@@ -542,8 +532,10 @@ pub(super) fn iterate(layers: &Layers, solution: &mut Solution, zenith_rad: &[f6
             albedo: layers.ground_albedo,
             diffuse: &diffuse,
         };
-        let new: Vec<NodeModes> =
-            (0..zenith_rad.len()).into_par_iter().map(|c| pass.node_modes(c, &rays, &dirs, &phis, modes)).collect();
+        let singles = singles.get_or_insert_with(|| {
+            (0..zenith_rad.len()).into_par_iter().map(|c| pass.singles(c, &rays, &dirs, &phis)).collect()
+        });
+        let new = node_modes(&pass, &rays, (&dirs, &phis), modes, singles);
         let mut at_levels = node_coefficients(s, &new, modes);
         let read: Coefficients = at_node_levels(&solution.a, &levels, modes);
         let moved = largest_move(&at_levels, &read);
