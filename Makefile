@@ -118,12 +118,13 @@ SUNSET_SPP_HAZED ?= 512
 # The README's contact sheet of the GPU preview: times of day (columns) x
 # weathers (rows: clear, hazy, cumulus, cloudy) at latitude 35 N on day 172,
 # looking south-west 16 degrees up, decoded from bakes/look.toml with clouds and the
-# landscape's fog. About 5 minutes for the bake on 2 cores, then 1 to 2 s a picture.
+# landscape's fog; the bake by the transport solver (no noise; since 2026-12-07, before
+# by the path tracer). Minutes for the bake on 2 cores, then 1 to 2 s a picture.
 PREVIEW_TIMES := 06:00 09:00 12:00 17:00 19:00
 PREVIEW_WEATHERS := clear:0:0:0 hazy:0.6:0:0.15 cumulus:0.2:0:0.5 cloudy:0.3:0.3:0.75
 preview-sheet: build lavapipe
 	@mkdir -p $(OUT)/preview-sheet docs/images/preview
-	$(SKY) bake-luts bakes/look.toml --out $(OUT)/look-luts --quality draft --method monte-carlo
+	$(SKY) bake-luts bakes/look.toml --out $(OUT)/look-luts --quality draft
 	for w in $(PREVIEW_WEATHERS); do \
 	  name=$${w%%:*}; rest=$${w#*:}; h=$${rest%%:*}; rest=$${rest#*:}; c=$${rest%%:*}; k=$${rest#*:}; \
 	  for t in $(PREVIEW_TIMES); do \

@@ -13,6 +13,7 @@ mod farm;
 mod fog;
 mod fuzz;
 mod hero;
+mod integrity;
 mod ktx_readers;
 mod openjd;
 mod preview;

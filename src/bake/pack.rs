@@ -26,7 +26,7 @@ use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
 use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry, SunEntry, TransmittanceEntry};
 use crate::lut::r11g11b10::{self, PackStats};
 use crate::lut::texels::Texels;
-use crate::lut::{rgba16f, transmittance};
+use crate::lut::{integrity, rgba16f, transmittance};
 use std::path::Path;
 
 /// The largest channel of a slice is scaled into (2^(TOP - 1), 2^TOP].
@@ -291,6 +291,8 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         transmittance: None,
         fog: None,
         ambient_file: None,
+        files: None,
+        manifest_sha256: None,
     }
 }
 
@@ -307,6 +309,15 @@ pub fn write_bake(
     let mut packed = skies.iter().map(|s| pack_sky(s, colour)).collect::<Result<Vec<_>, _>>()?;
     let fog = super::pack_fog::pack_fog(skies, colour)?;
     std::fs::create_dir_all(dir).map_err(|e| BakeError::Write(format!("{}: {e}", dir.display())))?;
+    // A manifest of an earlier bake here goes first: while the files are
+    // replaced, none names them.
+    let path = dir.join("manifest.json");
+    match std::fs::remove_file(&path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            return Err(BakeError::Write(format!("{}: {e}", path.display())))
+        }
+        _ => {}
+    }
     let mut entries = Vec::new();
     let mut stats = Vec::new();
     for p in &mut packed {
@@ -326,8 +337,15 @@ pub fn write_bake(
         Some(f) => Some(f.write(colour, dir)?),
         None => None,
     };
+    // Every file's size and digest as written, then the manifest's own.
+    let files = m.named_files().into_iter().map(|name| {
+        integrity::file_entry(dir, name).map_err(|e| BakeError::Write(format!("{}: {e}", dir.join(name).display())))
+    });
+    m.files = Some(files.collect::<Result<_, _>>()?);
+    m.manifest_sha256 = Some(integrity::UNSEALED.into());
     let text = compact_number_arrays(&serde_json::to_string_pretty(&m).expect("a manifest always serialises"));
-    let path = dir.join("manifest.json");
+    let (text, digest) = integrity::seal(&text);
+    m.manifest_sha256 = Some(digest);
     crate::atomic::write_atomically(&path, text.as_bytes())
         .map_err(|e| BakeError::Write(format!("{}: {e}", path.display())))?;
     Ok((m, stats))

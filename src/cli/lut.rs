@@ -37,6 +37,11 @@ pub enum LutCommand {
         after_help = "Example:\n  sky lut fog-falloff atmospheres/clear.toml --ceiling-km 3 --plot out/fog\n\nRenders the fog (the light the air below the ceiling scatters toward the camera in front of a black object) toward 7 elevations x 3 azimuths at 8 depths from 0.002 to 1 of the distance to the ceiling, for each sun, and fits Fog(x) = LUT (1 - exp(-a theta^p x)) / (1 - exp(-a theta^p)) in relative error."
     )]
     FogFalloff(super::lut_fog::FogFalloffArgs),
+    /// A bake's manifest and files against the sizes and SHA-256 digests the manifest records, and nothing else: exit 0 intact, 1 with the first missing, truncated or altered file named
+    #[command(
+        after_help = "Example:\n  sky lut check luts/manifest.json && cp -r luts game/assets/sky\n\nPrints each file's SHA-256, name and size (the first two as sha256sum prints them). Every other sky lut command and sky preview make the same check before they read a bake."
+    )]
+    Check(super::lut_check::CheckArgs),
 }
 
 /// The weather and the sun, as a runtime gives them.
@@ -205,6 +210,7 @@ pub fn run(c: LutCommand) -> Result<ExitCode> {
         LutCommand::Interpolation(a) => super::lut_interpolation::run(a),
         LutCommand::FogFalloff(a) => super::lut_fog::run(a),
         LutCommand::Decode(a) => decode(a),
+        LutCommand::Check(a) => super::lut_check::run(a),
     }
 }
 

@@ -22,6 +22,7 @@ mod bench_farm;
 mod bench_preview;
 mod farm_args;
 mod lut;
+mod lut_check;
 mod lut_fog;
 mod lut_interpolation;
 mod lut_verify;

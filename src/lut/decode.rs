@@ -276,26 +276,37 @@ fn load_error(path: &std::path::Path, message: impl Into<String>) -> LoadError {
     LoadError::File { path: path.to_path_buf(), message: message.into() }
 }
 
+/// A bake's manifest: its text and what it says, in a format and version
+/// this build reads.
+pub fn read_manifest(manifest_path: &std::path::Path) -> Result<(String, Manifest), LoadError> {
+    let text = std::fs::read_to_string(manifest_path).map_err(|e| load_error(manifest_path, e.to_string()))?;
+    let manifest: Manifest =
+        serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
+    if manifest.format != super::manifest::FORMAT || manifest.version != super::manifest::VERSION {
+        return Err(load_error(
+            manifest_path,
+            format!(
+                "a {} version {} manifest; this build reads {} version {}",
+                manifest.format,
+                manifest.version,
+                super::manifest::FORMAT,
+                super::manifest::VERSION
+            ),
+        ));
+    }
+    Ok((text, manifest))
+}
+
 impl Luts {
-    /// Loads a bake: its manifest and every texture it names, each read
-    /// with the `ktx2` crate (a reader independent of our writer) and
+    /// Loads a bake: its manifest and every texture it names, once the
+    /// files are as the manifest records them (`integrity::check`), each
+    /// read with the `ktx2` crate (a reader independent of our writer) and
     /// checked against its manifest entry.
     pub fn load(manifest_path: &std::path::Path) -> Result<Luts, LoadError> {
-        let text = std::fs::read_to_string(manifest_path).map_err(|e| load_error(manifest_path, e.to_string()))?;
-        let manifest: Manifest =
-            serde_json::from_str(&text).map_err(|e| load_error(manifest_path, format!("line {}: {e}", e.line())))?;
-        if manifest.format != super::manifest::FORMAT || manifest.version != super::manifest::VERSION {
-            return Err(load_error(
-                manifest_path,
-                format!(
-                    "a {} version {} manifest; this build reads {} version {}",
-                    manifest.format,
-                    manifest.version,
-                    super::manifest::FORMAT,
-                    super::manifest::VERSION
-                ),
-            ));
-        }
+        let (text, manifest) = read_manifest(manifest_path)?;
+        // Nothing is read from a file the manifest does not vouch for.
+        super::integrity::check(manifest_path, &text, &manifest)
+            .map_err(|d| LoadError::File { path: d.path, message: d.message })?;
         let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
         let mut textures = Vec::new();
         for e in &manifest.skies {

@@ -45,6 +45,38 @@ pub struct Manifest {
     /// version 2; the same numbers as each sky's `ambient`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ambient_file: Option<AmbientFileEntry>,
+    /// Every file the manifest names, with its size and SHA-256 (added
+    /// within version 2; `lut::integrity` checks them before a bake is
+    /// used).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub files: Option<Vec<FileEntry>>,
+    /// The SHA-256 of this manifest's own text with these 64 hex digits
+    /// written as zeros (`lut::integrity::seal`); the last field. Added
+    /// within version 2, with `files`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub manifest_sha256: Option<String>,
+}
+
+/// A file of the bake: its name (relative to the manifest), size and
+/// SHA-256 (lower-case hex, as `sha256sum` prints it).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FileEntry {
+    pub file: String,
+    pub bytes: u64,
+    pub sha256: String,
+}
+
+impl Manifest {
+    /// Every file this manifest names, in the order it names them.
+    pub fn named_files(&self) -> Vec<&str> {
+        let mut names: Vec<&str> = self.skies.iter().map(|s| s.file.as_str()).collect();
+        names.extend(self.transmittance.iter().map(|t| t.file.as_str()));
+        if let Some(f) = &self.fog {
+            names.extend([f.file.as_str(), f.attenuation.file.as_str()]);
+        }
+        names.extend(self.ambient_file.iter().map(|a| a.file.as_str()));
+        names
+    }
 }
 
 /// `ambient.ktx2`: per basis sky a layer of 64 columns (slices) by 11 rows
@@ -342,6 +374,8 @@ pub(crate) mod tests {
             transmittance: None,
             fog: None,
             ambient_file: None,
+            files: None,
+            manifest_sha256: None,
         }
     }
 

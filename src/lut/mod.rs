@@ -8,6 +8,7 @@ pub mod dds;
 pub mod decode;
 pub mod decode_fog;
 pub mod fog;
+pub mod integrity;
 pub mod ktx2;
 pub mod landscape;
 pub mod manifest;
