@@ -73,6 +73,7 @@ demo: build lavapipe
 	$(SKY) mie --m 1.33-1e-7i --lognormal 4.0,0.55 --wavelength-nm 550
 	$(SKY) render atmospheres/clear.toml --camera fisheye --size 128x128 --sun-zenith-deg 80 --spp 256 --max-rel-error 0.05 --denoise --out $(OUT)/clear_fisheye.exr --png $(OUT)/clear_fisheye.png
 	$(SKY) bake-luts bakes/demo.toml --out $(OUT)/luts --quality draft
+	$(SKY) lut check $(OUT)/luts/manifest.json
 	$(SKY) lut verify $(OUT)/luts/manifest.json --bake bakes/demo.toml --spp 64 --plot $(OUT)/luts/verify
 	$(SKY) lut decode $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --camera fisheye --size 256x256 --out $(OUT)/decoded.exr --png $(OUT)/decoded.png
 	$(SKY) lut sample $(OUT)/luts/manifest.json --sun-elevation-deg 10 --haziness 0.3 --cloudiness 0 --direction 60,180
