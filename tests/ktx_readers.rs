@@ -41,7 +41,7 @@ fn install_ktx_parse(dir: &Path) {
 
 /// Runs check.mjs on `file` (with a time limit: ktx-parse loops forever on
 /// some malformed input) and parses its JSON.
-fn ktx_parse(file: &Path, data: bool) -> Value {
+pub(crate) fn ktx_parse(file: &Path, data: bool) -> Value {
     let dir = root().join("tests/ktx_parse");
     install_ktx_parse(&dir);
     let mut cmd = Command::new("node");

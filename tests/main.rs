@@ -9,6 +9,7 @@ mod atmosphere_files;
 mod bake;
 mod cli;
 mod disort;
+mod engine_formats;
 mod farm;
 mod fog;
 mod fuzz;

@@ -106,7 +106,34 @@ fn cpu_spread(luts: &Luts, w: &Weather, d: DVec3) -> [f64; 3] {
 /// method: a slice, a mirror or a texel off by one misses by percents.
 #[test]
 fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
-    let luts = bake();
+    let elevations = [63.1, 41.7, 23.3, 8.2, 3.1, 2.6, 2.4, 0.4, -0.9, -2.7, -7.5, -9.95];
+    let weathers = [(0.0, 0.0), (1.0, 0.0), (0.3, 0.1), (0.6, 0.25), (0.0, 0.3)];
+    gpu_decodes_as_cpu(bake(), &elevations, &weathers);
+}
+
+/// The same with the skies in RGBA16F (`--texture-format rgba16f`, packed
+/// from the shared bake's cache): the GPU gets `Rgba16Float` arrays and
+/// decodes them as the CPU decoder does, to the same tolerance.
+#[test]
+fn the_gpu_sky_pass_decodes_rgba16f_skies_as_the_cpu_does() {
+    let (dir, _) = shared_bake();
+    let out = dir.path().join("rgba16f");
+    let o = Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(["bake-luts", "--method", "monte-carlo", "--texture-format", "rgba16f", "--pack-only", "--cache"])
+        .arg(dir.path().join("luts/cache"))
+        .arg(root().join("tests/bakes/preview.toml"))
+        .arg("--out")
+        .arg(&out)
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let luts = Luts::load(&out.join("manifest.json")).unwrap();
+    assert!(luts.manifest.skies.iter().all(|s| s.vk_format == 97));
+    gpu_decodes_as_cpu(&luts, &[41.7, 3.1, -2.7], &[(0.0, 0.0), (0.6, 0.25)]);
+}
+
+fn gpu_decodes_as_cpu(luts: &Luts, elevations: &[f64], weathers: &[(f64, f64)]) {
     let _device = GPU.lock().unwrap_or_else(|e| e.into_inner());
     let gpu = Gpu::new().expect("a GPU adapter (make test installs lavapipe)");
     eprintln!("adapter: {}", gpu.describe());
@@ -115,11 +142,9 @@ fn the_gpu_sky_pass_decodes_what_the_cpu_decoder_does() {
         .flat_map(|i| (0..24).map(move |j| Some(direction_deg(7.5 * i as f64, 15.0 * j as f64))))
         .chain([None])
         .collect();
-    let elevations = [63.1, 41.7, 23.3, 8.2, 3.1, 2.6, 2.4, 0.4, -0.9, -2.7, -7.5, -9.95];
-    let weathers = [(0.0, 0.0), (1.0, 0.0), (0.3, 0.1), (0.6, 0.25), (0.0, 0.3)];
     let (mut worst, mut compared, mut steep) = (0.0f64, 0, 0);
-    for &e in &elevations {
-        for &(haziness, cloudiness) in &weathers {
+    for &e in elevations {
+        for &(haziness, cloudiness) in weathers {
             let weather = Weather { sun_elevation_deg: e, sun_azimuth_deg: 7.0, haziness, cloudiness, sun_disk: false };
             let gpu_rgb = pass.decode(&gpu, luts, &weather, &dirs).unwrap().rgb;
             let cpu: Vec<[f64; 3]> =

@@ -23,6 +23,7 @@
 
 use super::file::{BakeFile, Quality};
 use crate::colour::ColourSpace;
+use crate::lut::container::{Container, TextureFormat};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -52,6 +53,8 @@ pub struct PlanDefaults {
     pub quality: Quality,
     pub method: super::Method,
     pub colour_space: ColourSpace,
+    /// The texture format and container of the pack step.
+    pub encoding: crate::lut::container::Encoding,
 }
 
 /// A YAML scalar: a JSON string.
@@ -177,6 +180,18 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
         list(ColourSpace::ALL.iter().map(|c| q(c.name()))),
         q(d.colour_space.name())
     );
+    let _ = writeln!(
+        w,
+        "- name: \"TextureFormat\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
+        list(TextureFormat::ALL.iter().map(|f| q(f.name()))),
+        q(d.encoding.texture_format.name())
+    );
+    let _ = writeln!(
+        w,
+        "- name: \"Container\"\n  type: \"STRING\"\n  allowedValues: {}\n  default: {}",
+        list(Container::ALL.iter().map(|c| q(c.name()))),
+        q(d.encoding.container.name())
+    );
     let _ = writeln!(w, "steps:");
     let _ = writeln!(w, "- name: \"Render\"\n  parameterSpace:\n    taskParameterDefinitions:\n    - name: \"Slice\"\n      type: \"STRING\"\n      range: {}", list(slices));
     let _ = writeln!(
@@ -188,7 +203,15 @@ pub fn job_template(bake: &BakeFile, job_name: &str, d: &PlanDefaults) -> String
     let _ = writeln!(
         w,
         "  script:\n    actions:\n      onRun:\n        command: \"{{{{Param.SkyExecutable}}}}\"\n        args: {}",
-        args(&["--colour-space", "{{Param.ColourSpace}}", "--pack-only"])
+        args(&[
+            "--colour-space",
+            "{{Param.ColourSpace}}",
+            "--texture-format",
+            "{{Param.TextureFormat}}",
+            "--container",
+            "{{Param.Container}}",
+            "--pack-only"
+        ])
     );
     t
 }
@@ -203,6 +226,7 @@ pub fn default_within(from: &Path, target: &Path) -> Option<PathBuf> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::lut::container::Encoding;
 
     #[test]
     fn path_defaults_stay_inside_the_template_folder() {
@@ -224,6 +248,7 @@ mod tests {
             quality: Quality::Final,
             method: crate::bake::Method::MonteCarlo,
             colour_space: ColourSpace::AcesCg,
+            encoding: Encoding { texture_format: TextureFormat::Rgba16f, container: Container::Dds },
         };
         let t = job_template(&bake, "sky bake-luts bake", &d);
         assert!(t.contains("\"--method\", \"{{Param.Method}}\"") && t.contains("default: \"monte-carlo\""), "{t}");
@@ -235,6 +260,11 @@ mod tests {
         assert!(t.contains("default: \"final\"") && t.contains("default: \"acescg\""), "{t}");
         assert!(t.contains("\"--slice\", \"{{Task.Param.Slice}}\""), "{t}");
         assert!(t.contains("\"--pack-only\""), "{t}");
+        assert!(t.contains("\"--container\", \"{{Param.Container}}\"") && t.contains("default: \"dds\""), "{t}");
+        assert!(
+            t.contains("\"--texture-format\", \"{{Param.TextureFormat}}\"") && t.contains("default: \"rgba16f\""),
+            "{t}"
+        );
         assert_eq!(t.matches("dependsOn: \"Render\"").count(), 1);
         assert_eq!(t.matches("default: \"cache\"").count(), 1);
         let bake_param = &t[t.find("name: \"BakeFile\"").unwrap()..t.find("name: \"OutDir\"").unwrap()];

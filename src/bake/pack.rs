@@ -22,9 +22,10 @@ use super::BakeError;
 use crate::colour::ColourSpace;
 use crate::directions::mapping;
 use crate::lut::ambient::{self, Ambient};
-use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_B10G11R11_UFLOAT_PACK32};
+use crate::lut::container::{self, Container, Encoding, Packed, TextureFormat};
+use crate::lut::ktx2::{self, ArrayTexture};
 use crate::lut::manifest::{self, Manifest, SkyEntry, SliceEntry, SunEntry, TransmittanceEntry};
-use crate::lut::r11g11b10::{self, PackStats};
+use crate::lut::r11g11b10::PackStats;
 use crate::lut::texels::Texels;
 use crate::lut::{integrity, rgba16f, transmittance};
 use std::path::Path;
@@ -45,8 +46,8 @@ pub fn slice_scale_log2(max_value: f64) -> i32 {
 pub struct PackedSky {
     pub entry: SkyEntry,
     pub stats: PackStats,
-    /// The array's words, layer after layer.
-    words: Vec<u32>,
+    /// The array's texels, layer after layer.
+    texels: Packed,
     /// The file's own manifest entry (its `sky` key).
     sky_json: String,
 }
@@ -59,11 +60,15 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Packs one basis sky (every slice present) in memory; a texel that is
-/// not finite is an error naming it.
-pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeError> {
+/// Packs one basis sky (every slice present) in memory in `format`, for
+/// `container`; a texel that is not finite is an error naming it.
+pub fn pack_sky(
+    s: &SkySlices,
+    colour: ColourSpace,
+    (format, container): (TextureFormat, Container),
+) -> Result<PackedSky, BakeError> {
     let (w, h) = (s.sky.width, s.sky.height);
-    let mut words = Vec::with_capacity(w * h * s.slices.len());
+    let mut texels: Option<Packed> = None;
     let mut stats = PackStats::default();
     let mut negative = 0;
     let mut slices = Vec::new();
@@ -75,14 +80,17 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         let k = slice_scale_log2(max);
         let scale = (k as f64).exp2();
         let scaled: Vec<[f64; 3]> = rgb.iter().map(|p| p.map(|c| c * scale)).collect();
-        let (packed, st) = r11g11b10::pack_array(&scaled).map_err(|e| BakeError::NotFinite {
+        let (packed, st) = container::pack_array(format, &scaled).map_err(|e| BakeError::NotFinite {
             sky: s.sky.name.clone(),
             index,
             u: e.texel % w,
             v: e.texel / w,
             what: "RGB",
         })?;
-        words.extend(packed);
+        match &mut texels {
+            Some(t) => t.extend(packed),
+            None => texels = Some(packed),
+        }
         stats.merge(&st);
         let rel: Vec<f64> =
             slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
@@ -106,12 +114,12 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
             ambient::of_slice(&slice.xyz, w, h, &m).transformed(&to_rgb)
         })
         .collect();
-    let file = format!("{}.ktx2", s.sky.name);
+    let texels = texels.ok_or_else(|| BakeError::Write(format!("{}: no slice to pack", s.sky.name)))?;
     let entry = SkyEntry {
         name: s.sky.name.clone(),
-        file,
-        format: "B10G11R11_UFLOAT_PACK32".into(),
-        vk_format: VK_FORMAT_B10G11R11_UFLOAT_PACK32,
+        file: container.file_name(&s.sky.name),
+        format: format.vulkan_name().into(),
+        vk_format: format.vk_format(),
         bytes: 0,
         width: w,
         height: h,
@@ -140,23 +148,23 @@ pub fn pack_sky(s: &SkySlices, colour: ColourSpace) -> Result<PackedSky, BakeErr
         object.remove(key);
     }
     let sky_json = inner.to_string();
-    Ok(PackedSky { entry, stats, words, sky_json })
+    Ok(PackedSky { entry, stats, texels, sky_json })
 }
 
 impl PackedSky {
-    /// Writes `dir/NAME.ktx2` (through a temporary file and a rename) and
-    /// records its size in the entry.
-    pub fn write(&mut self, colour: ColourSpace, dir: &Path) -> Result<(), BakeError> {
+    /// Writes its file in `dir` (through a temporary file and a rename)
+    /// and records its size in the entry.
+    pub fn write(&mut self, colour: ColourSpace, container: Container, dir: &Path) -> Result<(), BakeError> {
         let e = &self.entry;
         let tex = ArrayTexture {
             width: e.width as u32,
             height: e.height as u32,
             layers: e.layers as u32,
             colour_space: colour,
-            texels: Texels::B10G11R11(&self.words),
+            texels: self.texels.texels(),
             sky_json: &self.sky_json,
         };
-        self.entry.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+        self.entry.bytes = container::write(container, &dir.join(&e.file), &tex).map_err(BakeError::Write)?;
         Ok(())
     }
 }
@@ -181,7 +189,7 @@ fn sun_entry(l: &SkyLighting, colour: ColourSpace) -> SunEntry {
 fn write_transmittance(
     skies: &[SkySlices],
     entries: &mut [SkyEntry],
-    colour: ColourSpace,
+    (colour, container): (ColourSpace, Container),
     dir: &Path,
 ) -> Result<Option<TransmittanceEntry>, BakeError> {
     let Some(lightings) = skies.iter().map(|s| s.lighting.as_ref()).collect::<Option<Vec<_>>>() else {
@@ -207,7 +215,7 @@ fn write_transmittance(
     }
     let t = &first.transmittance.mapping;
     let mut entry = TransmittanceEntry {
-        file: "transmittance.ktx2".into(),
+        file: container.file_name("transmittance"),
         format: "R16G16B16A16_SFLOAT".into(),
         vk_format: ktx2::VK_FORMAT_R16G16B16A16_SFLOAT,
         bytes: 0,
@@ -229,7 +237,7 @@ fn write_transmittance(
         texels: Texels::Rgba16f(&halves),
         sky_json: &json,
     };
-    entry.bytes = ktx2::write(&dir.join(&entry.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+    entry.bytes = container::write(container, &dir.join(&entry.file), &tex).map_err(BakeError::Write)?;
     Ok(Some(entry))
 }
 
@@ -288,6 +296,7 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
         weather: manifest::weather(),
         skies,
         method: None,
+        container: None,
         transmittance: None,
         fog: None,
         ambient_file: None,
@@ -301,12 +310,16 @@ pub fn manifest(quality: &str, colour: ColourSpace, skies: Vec<SkyEntry>) -> Man
 pub fn write_bake(
     skies: &[SkySlices],
     (quality, method): (&str, super::Method),
-    colour: ColourSpace,
+    (colour, encoding): (ColourSpace, Encoding),
     dir: &Path,
 ) -> Result<(Manifest, Vec<PackStats>), BakeError> {
+    let container = encoding.container;
     // Every sky packed before any file is written: a texel that is not
     // finite leaves no file behind.
-    let mut packed = skies.iter().map(|s| pack_sky(s, colour)).collect::<Result<Vec<_>, _>>()?;
+    let mut packed = skies
+        .iter()
+        .map(|s| pack_sky(s, colour, (encoding.texture_format, container)))
+        .collect::<Result<Vec<_>, _>>()?;
     let fog = super::pack_fog::pack_fog(skies, colour)?;
     std::fs::create_dir_all(dir).map_err(|e| BakeError::Write(format!("{}: {e}", dir.display())))?;
     // A manifest of an earlier bake here goes first: while the files are
@@ -321,20 +334,21 @@ pub fn write_bake(
     let mut entries = Vec::new();
     let mut stats = Vec::new();
     for p in &mut packed {
-        p.write(colour, dir)?;
+        p.write(colour, container, dir)?;
     }
     for p in packed {
         entries.push(p.entry);
         stats.push(p.stats);
     }
-    let transmittance = write_transmittance(skies, &mut entries, colour, dir)?;
-    let ambient_file = super::pack_ambient::write_ambient(&entries, colour, dir)?;
+    let transmittance = write_transmittance(skies, &mut entries, (colour, container), dir)?;
+    let ambient_file = super::pack_ambient::write_ambient(&entries, (colour, container), dir)?;
     let mut m = manifest(quality, colour, entries);
     m.method = Some(method.name().into());
+    m.container = Some(container.name().into());
     m.transmittance = transmittance;
     m.ambient_file = ambient_file;
     m.fog = match fog {
-        Some(f) => Some(f.write(colour, dir)?),
+        Some(f) => Some(f.write((colour, container), dir)?),
         None => None,
     };
     // Every file's size and digest as written, then the manifest's own.

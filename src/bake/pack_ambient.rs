@@ -10,7 +10,8 @@
 use super::pack::slice_scale_log2;
 use super::BakeError;
 use crate::colour::ColourSpace;
-use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
+use crate::lut::container::{self, Container};
+use crate::lut::ktx2::{ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
 use crate::lut::manifest::{AmbientFileEntry, SkyEntry};
 use crate::lut::rgba16f;
 use crate::lut::texels::Texels;
@@ -20,11 +21,11 @@ use std::path::Path;
 pub const ROWS: [&str; 11] =
     ["irradiance_up", "mean_radiance", "L00", "L1-1", "L10", "L11", "L2-2", "L2-1", "L20", "L21", "L22"];
 
-/// Writes `dir/ambient.ktx2` from the skies' manifest entries (None when
+/// Writes `dir/ambient.ktx2` (or `.dds`) from the skies' manifest entries (None when
 /// a sky has no ambient light, or the skies differ in slice count).
 pub fn write_ambient(
     entries: &[SkyEntry],
-    colour: ColourSpace,
+    (colour, container): (ColourSpace, Container),
     dir: &Path,
 ) -> Result<Option<AmbientFileEntry>, BakeError> {
     let Some(ambients) = entries.iter().map(|e| e.ambient.as_ref()).collect::<Option<Vec<_>>>() else {
@@ -65,7 +66,7 @@ pub fn write_ambient(
         scales.push(k);
     }
     let mut entry = AmbientFileEntry {
-        file: "ambient.ktx2".into(),
+        file: container.file_name("ambient"),
         format: "R16G16B16A16_SFLOAT".into(),
         vk_format: VK_FORMAT_R16G16B16A16_SFLOAT,
         bytes: 0,
@@ -84,6 +85,6 @@ pub fn write_ambient(
         texels: Texels::Rgba16f(&halves),
         sky_json: &json,
     };
-    entry.bytes = ktx2::write(&dir.join(&entry.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+    entry.bytes = container::write(container, &dir.join(&entry.file), &tex).map_err(BakeError::Write)?;
     Ok(Some(entry))
 }

@@ -14,8 +14,9 @@ use super::pack::slice_scale_log2;
 use super::run::SkySlices;
 use super::BakeError;
 use crate::colour::ColourSpace;
+use crate::lut::container::{self, Container};
 use crate::lut::fog::ATTENUATION_SIZE;
-use crate::lut::ktx2::{self, ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
+use crate::lut::ktx2::{ArrayTexture, VK_FORMAT_R16G16B16A16_SFLOAT};
 use crate::lut::manifest::{AttenuationEntry, FogEntry, FogSkyEntry};
 use crate::lut::rgba16f;
 use crate::lut::texels::Texels;
@@ -120,10 +121,12 @@ pub fn pack_fog(skies: &[SkySlices], colour: ColourSpace) -> Result<Option<Packe
 }
 
 impl PackedFog {
-    /// Writes `dir/fog.ktx2` and `dir/attenuation.ktx2` (each through a
-    /// temporary file and a rename) and returns the manifest entry.
-    pub fn write(self, colour: ColourSpace, dir: &Path) -> Result<FogEntry, BakeError> {
+    /// Writes `dir/fog.ktx2` and `dir/attenuation.ktx2` (or `.dds`, each
+    /// through a temporary file and a rename) and returns the manifest entry.
+    pub fn write(self, (colour, container): (ColourSpace, Container), dir: &Path) -> Result<FogEntry, BakeError> {
         let mut e = self.entry;
+        e.file = container.file_name("fog");
+        e.attenuation.file = container.file_name("attenuation");
         let json =
             serde_json::to_string(&FogEntry { skies: Vec::new(), ..e.clone() }).expect("an entry always serialises");
         let tex = ArrayTexture {
@@ -134,7 +137,7 @@ impl PackedFog {
             texels: Texels::Rgba16f(&self.fog),
             sky_json: &json,
         };
-        e.bytes = ktx2::write(&dir.join(&e.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+        e.bytes = container::write(container, &dir.join(&e.file), &tex).map_err(BakeError::Write)?;
         let a = &e.attenuation;
         let json = serde_json::to_string(a).expect("an entry always serialises");
         let tex = ArrayTexture {
@@ -146,7 +149,7 @@ impl PackedFog {
             sky_json: &json,
         };
         e.attenuation.bytes =
-            ktx2::write(&dir.join(&e.attenuation.file), &tex).map_err(|e| BakeError::Write(e.to_string()))?;
+            container::write(container, &dir.join(&e.attenuation.file), &tex).map_err(BakeError::Write)?;
         Ok(e)
     }
 }

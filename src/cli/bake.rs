@@ -9,6 +9,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use sky::bake::{self, BakeEvent, BakeFile, BakeOptions, BakeSink, Quality, SliceCache, SliceId};
 use sky::colour::ColourSpace;
 use sky::farm::coordinator::{Options, WorkerSpec};
+use sky::lut::container::{Container, Encoding, TextureFormat};
 use sky::mie::MieCache;
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -36,6 +37,12 @@ pub struct BakeArgs {
     /// Linear RGB space of the textures: rec709, rec2020, acescg or xyz (the manifest records its matrix)
     #[arg(long, default_value = "rec709", value_parser = parse_colour_space)]
     colour_space: ColourSpace,
+    /// Texel format of the basis skies' arrays: r11g11b10 (4 bytes, the talk's; Bevy and Vulkan/Direct3D engines load it) or rgba16f (8 bytes, for Godot 4 and Unreal 5, which cannot import R11G11B10 arrays; docs/manifest.md "Engines"). The fog, transmittance and ambient files are RGBA16F either way
+    #[arg(long, default_value = "r11g11b10", value_name = "FORMAT", value_parser = parse_texture_format)]
+    texture_format: TextureFormat,
+    /// Container of every texture file: ktx2 (KTX 2.0, the default, with each file's manifest entry inside) or dds (DDS with the DX10 header, for engines and tools that take DDS)
+    #[arg(long, default_value = "ktx2", value_name = "CONTAINER", value_parser = parse_container)]
+    container: Container,
     /// The slice cache (default: OUT/cache)
     #[arg(long, value_name = "DIR")]
     cache: Option<PathBuf>,
@@ -62,6 +69,12 @@ pub struct BakeArgs {
     json_progress: bool,
     #[command(flatten)]
     farm: FarmArgs,
+}
+
+impl BakeArgs {
+    fn encoding(&self) -> Encoding {
+        Encoding { texture_format: self.texture_format, container: self.container }
+    }
 }
 
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -233,6 +246,14 @@ fn sink(style: Style, bar: Arc<Mutex<Option<ProgressBar>>>) -> BakeSink {
     })
 }
 
+fn parse_texture_format(s: &str) -> Result<TextureFormat, String> {
+    s.parse()
+}
+
+fn parse_container(s: &str) -> Result<Container, String> {
+    s.parse()
+}
+
 /// `--colour-space`: one of [`ColourSpace::ALL`] by its name.
 fn parse_colour_space(s: &str) -> Result<ColourSpace, String> {
     s.parse().map_err(|e: sky::colour::UnknownColourSpace| e.to_string())
@@ -362,11 +383,15 @@ fn report_rendered(skies: &[bake::SkySlices], started: Instant) -> usize {
 /// Packs the rendered skies into the LUT files and manifest.json in --out,
 /// and reports them (on stderr; with --json, the summary on stdout).
 fn pack(a: &BakeArgs, skies: &[bake::SkySlices], quality: Quality) -> Result<ExitCode> {
-    let (manifest, stats) =
-        match bake::pack::write_bake(skies, (quality.name(), a.method.method()), a.colour_space, &a.out) {
-            Ok(m) => m,
-            Err(e) => return failed(a.json, quality, &e),
-        };
+    let (manifest, stats) = match bake::pack::write_bake(
+        skies,
+        (quality.name(), a.method.method()),
+        (a.colour_space, a.encoding()),
+        &a.out,
+    ) {
+        Ok(m) => m,
+        Err(e) => return failed(a.json, quality, &e),
+    };
     let total_bytes: u64 = manifest.skies.iter().map(|s| s.bytes).sum();
     for (e, st) in manifest.skies.iter().zip(&stats) {
         eprintln!(
@@ -432,7 +457,7 @@ fn pack(a: &BakeArgs, skies: &[bake::SkySlices], quality: Quality) -> Result<Exi
             .collect();
         outln!(
             "{}",
-            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "method": a.method.method().name(), "colour_space": a.colour_space.name(), "total_bytes": total_bytes, "skies": skies_json, "fog": fog_json, "errors": [] })
+            serde_json::json!({ "manifest": a.out.join("manifest.json"), "quality": quality.name(), "method": a.method.method().name(), "colour_space": a.colour_space.name(), "texture_format": a.texture_format.name(), "container": a.container.name(), "total_bytes": total_bytes, "skies": skies_json, "fog": fog_json, "errors": [] })
         );
     }
     Ok(ExitCode::SUCCESS)
@@ -476,6 +501,7 @@ fn write_openjd_plan(a: &BakeArgs, bake: &BakeFile, quality: Quality) -> Result<
         quality,
         method: a.method.method(),
         colour_space: a.colour_space,
+        encoding: a.encoding(),
     };
     let stem = bake_path.file_stem().map_or("bake".into(), |s| s.to_string_lossy().into_owned());
     let text = bake::openjd::job_template(bake, &format!("sky bake-luts {stem}"), &defaults);

@@ -215,45 +215,31 @@ impl Luts {
     }
 }
 
-/// The layers of an RGBA16F 2-D array texture (KTX2, vkFormat 97) of
-/// `width` × `height` × `layers`, RGB, row-major; read with the `ktx2`
-/// crate and checked against those sizes.
-pub(crate) fn read_rgba16f_array(
+/// The layers of a 2-D array texture file in `container` of `width` ×
+/// `height` × `layers` texels in one of `vk_formats`, RGB, row-major;
+/// checked against those sizes ([`super::container::read`]).
+pub(crate) fn read_rgb_array(
     path: &std::path::Path,
-    width: usize,
-    height: usize,
-    layers: usize,
+    container: super::container::Container,
+    vk_formats: &[u32],
+    (width, height, layers): (usize, usize, usize),
 ) -> Result<Vec<Vec<[f32; 3]>>, LoadError> {
-    let bytes = std::fs::read(path).map_err(|err| load_error(path, err.to_string()))?;
-    let r = ktx2::Reader::new(bytes.as_slice()).map_err(|err| load_error(path, format!("not a KTX2 file: {err:?}")))?;
-    let h = r.header();
-    let format = h.format.map(|f| f.value()).unwrap_or(0);
-    if format != super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT
-        || (h.pixel_width as usize, h.pixel_height as usize) != (width, height)
-        || h.layer_count as usize != layers
-    {
+    let level = super::container::read(container, path).map_err(|m| load_error(path, m))?;
+    if !vk_formats.contains(&level.vk_format) || (level.width, level.height, level.layers) != (width, height, layers) {
+        let formats: Vec<String> = vk_formats.iter().map(u32::to_string).collect();
         return Err(load_error(
             path,
-            format!("vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 97, {width} x {height} x {layers} layers", h.pixel_width, h.pixel_height, h.layer_count),
+            format!(
+                "vkFormat {}, {} x {} x {} layers; the manifest says vkFormat {}, {width} x {height} x {layers} layers",
+                level.vk_format,
+                level.width,
+                level.height,
+                level.layers,
+                formats.join(" or ")
+            ),
         ));
     }
-    let level = r.levels().next().ok_or_else(|| load_error(path, "no level 0"))?;
-    if level.data.len() != 8 * width * height * layers {
-        return Err(load_error(
-            path,
-            format!("level 0 holds {} bytes, not {}", level.data.len(), 8 * width * height * layers),
-        ));
-    }
-    let texels: Vec<[f32; 3]> = level
-        .data
-        .chunks_exact(8)
-        .map(|b| {
-            let h = [0, 2, 4, 6].map(|i| u16::from_le_bytes([b[i], b[i + 1]]));
-            let v = super::rgba16f::unpack(h);
-            [v[0], v[1], v[2]]
-        })
-        .collect();
-    Ok(texels.chunks(width * height).map(<[[f32; 3]]>::to_vec).collect())
+    level.rgb_layers().map_err(|m| load_error(path, m))
 }
 
 /// The direction through each pixel centre of a `width` × `height` image
@@ -300,81 +286,49 @@ pub fn read_manifest(manifest_path: &std::path::Path) -> Result<(String, Manifes
 impl Luts {
     /// Loads a bake: its manifest and every texture it names, once the
     /// files are as the manifest records them (`integrity::check`), each
-    /// read with the `ktx2` crate (a reader independent of our writer) and
-    /// checked against its manifest entry.
+    /// read in the manifest's container (KTX2 with the `ktx2` crate, a
+    /// reader independent of our writer; or DDS) and checked against its
+    /// manifest entry.
     pub fn load(manifest_path: &std::path::Path) -> Result<Luts, LoadError> {
         let (text, manifest) = read_manifest(manifest_path)?;
         // Nothing is read from a file the manifest does not vouch for.
         super::integrity::check(manifest_path, &text, &manifest)
             .map_err(|d| LoadError::File { path: d.path, message: d.message })?;
         let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
+        let container = super::container::Container::of_manifest(manifest.container.as_deref())
+            .map_err(|m| load_error(manifest_path, format!("container: {m}")))?;
+        const HALVES: &[u32] = &[super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT];
         let mut textures = Vec::new();
         for e in &manifest.skies {
             let path = dir.join(&e.file);
-            let bytes = std::fs::read(&path).map_err(|err| load_error(&path, err.to_string()))?;
-            let r = ktx2::Reader::new(bytes.as_slice())
-                .map_err(|err| load_error(&path, format!("not a KTX2 file: {err:?}")))?;
-            let h = r.header();
-            let format = h.format.map(|f| f.value()).unwrap_or(0);
-            if format != super::ktx2::VK_FORMAT_B10G11R11_UFLOAT_PACK32
-                || h.pixel_width as usize != e.width
-                || h.pixel_height as usize != e.height
-                || h.layer_count as usize != e.layers
-                || e.slices.len() != e.layers
-            {
+            if e.slices.len() != e.layers {
                 return Err(load_error(
                     &path,
-                    format!(
-                        "vkFormat {format}, {} x {} x {} layers; the manifest says vkFormat 122, {} x {} x {} layers and {} slices",
-                        h.pixel_width,
-                        h.pixel_height,
-                        h.layer_count,
-                        e.width,
-                        e.height,
-                        e.layers,
-                        e.slices.len()
-                    ),
+                    format!("{} layers but {} slices in the manifest", e.layers, e.slices.len()),
                 ));
             }
-            let level = r.levels().next().ok_or_else(|| load_error(&path, "no level 0"))?;
-            let texels = e.width * e.height;
-            if level.data.len() != 4 * texels * e.layers {
-                return Err(load_error(
-                    &path,
-                    format!("level 0 holds {} bytes, not {}", level.data.len(), 4 * texels * e.layers),
-                ));
-            }
-            let words: Vec<[f32; 3]> = level
-                .data
-                .chunks_exact(4)
-                .map(|b| super::r11g11b10::unpack(u32::from_le_bytes([b[0], b[1], b[2], b[3]])))
-                .collect();
-            let layers = words.chunks(texels).map(<[[f32; 3]]>::to_vec).collect();
+            let layers = read_rgb_array(&path, container, &[e.vk_format], (e.width, e.height, e.layers))?;
             textures.push(Texture { width: e.width, height: e.height, layers });
         }
         let mut transmittance = Vec::new();
         if let Some(t) = &manifest.transmittance {
-            transmittance = read_rgba16f_array(
-                &dir.join(&t.file),
-                super::transmittance::WIDTH,
-                super::transmittance::HEIGHT,
-                t.layers.len(),
-            )?;
+            let size = (super::transmittance::WIDTH, super::transmittance::HEIGHT, t.layers.len());
+            transmittance = read_rgb_array(&dir.join(&t.file), container, HALVES, size)?;
         }
         let fog = match &manifest.fog {
             Some(f) => Some(super::decode_fog::FogTextures {
-                fog: read_rgba16f_array(&dir.join(&f.file), f.width, f.height, f.layers)?,
-                attenuation: read_rgba16f_array(
+                fog: read_rgb_array(&dir.join(&f.file), container, HALVES, (f.width, f.height, f.layers))?,
+                attenuation: read_rgb_array(
                     &dir.join(&f.attenuation.file),
-                    f.attenuation.width,
-                    f.attenuation.height,
-                    f.attenuation.layers.len(),
+                    container,
+                    HALVES,
+                    (f.attenuation.width, f.attenuation.height, f.attenuation.layers.len()),
                 )?,
             }),
             None => None,
         };
         let ambient_texture = match &manifest.ambient_file {
-            Some(a) => read_rgba16f_array(&dir.join(&a.file), a.width, a.height, a.layers.len())?,
+            Some(a) => read_rgb_array(&dir.join(&a.file), container, HALVES, (a.width, a.height, a.layers.len()))?,
             None => Vec::new(),
         };
         Ok(Luts { manifest, textures, transmittance, fog, ambient_texture })

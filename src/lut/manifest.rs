@@ -25,6 +25,10 @@ pub struct Manifest {
     /// version 2; absent from bakes made before it, all "monte-carlo".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub method: Option<String>,
+    /// The texture files' container: "ktx2" or "dds" (`lut::container`;
+    /// added within version 2, absent: "ktx2").
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub container: Option<String>,
     /// What a decoded texel means.
     pub units: Units,
     pub colour: Colour,
@@ -365,6 +369,7 @@ pub(crate) mod tests {
             generator: format!("sky {}", crate::VERSION),
             quality: "draft".into(),
             method: None,
+            container: None,
             units: Units { luminance: "cd/m^2".into(), scale: String::new() },
             colour: Colour { space: "xyz".into(), rgb_from_xyz: i, xyz_from_rgb: i, note: String::new() },
             time_mapping: time_mapping(),

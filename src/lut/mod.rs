@@ -4,6 +4,7 @@
 //! live on the ground floor, in [`crate::directions::mapping`].
 
 pub mod ambient;
+pub mod container;
 pub mod dds;
 pub mod decode;
 pub mod decode_fog;

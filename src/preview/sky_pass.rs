@@ -2,11 +2,10 @@
 //! list of directions (`shaders/sky_decode.wgsl`), the same decode as the
 //! CPU reference decoder's [`Luts::sample`].
 //!
-//! The arrays go to the GPU as the bake stores them: R11G11B10F 2-D array
-//! textures of 64 layers (wgpu's `Rg11b10Ufloat`, Vulkan's
-//! `B10G11R11_UFLOAT_PACK32`, vkFormat 122), one per basis sky, their words
-//! rebuilt from the loaded texels (the format round-trips every code
-//! exactly; `lut::r11g11b10` tests it). The weather rule, the slice pair
+//! The arrays go to the GPU as the bake stores them: 2-D array textures of
+//! 64 layers, one per basis sky, R11G11B10F (wgpu's `Rg11b10Ufloat`,
+//! Vulkan's `B10G11R11_UFLOAT_PACK32`, vkFormat 122) or RGBA16F
+//! (`Rgba16Float`, vkFormat 97), their codes rebuilt from the loaded texels. The weather rule, the slice pair
 //! and the slices' scales are worked out per frame on the CPU by the very
 //! functions the CPU decoder uses; the shader does the per-direction work.
 //! Directions come from the CPU cameras (`directions::camera`): one definition
@@ -16,8 +15,12 @@ use super::frame::{Frame, Rendered};
 use super::gpu::{array_entry, buffer_entry, Gpu};
 use super::PreviewError;
 use crate::directions::mapping;
+use crate::lut::container::TextureFormat;
+use crate::lut::decode::Texture;
 use crate::lut::decode::{slice_pair, Luts};
-use crate::lut::r11g11b10;
+use crate::lut::manifest::SkyEntry;
+use crate::lut::r11g11b10::{self, PackError};
+use crate::lut::rgba16f;
 use crate::lut::weather::{basis_weights, BASIS};
 use glam::DVec3;
 
@@ -37,6 +40,31 @@ pub struct Weather {
     pub sun_disk: bool,
 }
 
+/// A basis sky's array in the bake's own texel format, its codes rebuilt
+/// from the loaded texels (each format round-trips every code exactly:
+/// `lut::r11g11b10` and `lut::rgba16f` test it).
+fn texels_as_stored(entry: &SkyEntry, texture: &Texture) -> Result<(wgpu::TextureFormat, Vec<u8>), PreviewError> {
+    let fail = |e: PackError| PreviewError::Bake(format!("{}: a texel does not pack: {e}", entry.name));
+    let texels = texture.layers.iter().flatten().map(|t| t.map(f64::from));
+    match TextureFormat::of_vk_format(entry.vk_format) {
+        Some(TextureFormat::R11g11b10) => {
+            let mut bytes = Vec::with_capacity(4 * entry.width * entry.height * entry.layers);
+            for t in texels {
+                bytes.extend_from_slice(&r11g11b10::pack(t).map_err(fail)?.to_le_bytes());
+            }
+            Ok((wgpu::TextureFormat::Rg11b10Ufloat, bytes))
+        }
+        Some(TextureFormat::Rgba16f) => {
+            let mut bytes = Vec::with_capacity(8 * entry.width * entry.height * entry.layers);
+            for t in texels {
+                rgba16f::pack(t).map_err(fail)?.iter().for_each(|h| bytes.extend_from_slice(&h.to_le_bytes()));
+            }
+            Ok((wgpu::TextureFormat::Rgba16Float, bytes))
+        }
+        None => Err(PreviewError::Bake(format!("{}: vkFormat {} is not a sky format", entry.name, entry.vk_format))),
+    }
+}
+
 /// A bake's sky arrays on the GPU and the pipeline that decodes them.
 pub struct SkyPass {
     textures: Vec<wgpu::TextureView>,
@@ -49,22 +77,8 @@ impl SkyPass {
     pub fn new(gpu: &Gpu, luts: &Luts) -> Result<SkyPass, PreviewError> {
         let mut textures = Vec::new();
         for (entry, texture) in luts.manifest.skies.iter().zip(&luts.textures) {
-            let mut words = Vec::with_capacity(4 * entry.width * entry.height * entry.layers);
-            for layer in &texture.layers {
-                for &t in layer {
-                    let w = r11g11b10::pack_f32(t)
-                        .map_err(|e| PreviewError::Bake(format!("{}: a texel does not pack: {e}", entry.name)))?;
-                    words.extend_from_slice(&w.to_le_bytes());
-                }
-            }
-            textures.push(gpu.array_texture(
-                &entry.name,
-                wgpu::TextureFormat::Rg11b10Ufloat,
-                entry.width,
-                entry.height,
-                entry.layers,
-                &words,
-            )?);
+            let (format, bytes) = texels_as_stored(entry, texture)?;
+            textures.push(gpu.array_texture(&entry.name, format, entry.width, entry.height, entry.layers, &bytes)?);
         }
         if textures.is_empty() {
             return Err(PreviewError::Bake("the bake has no basis sky".into()));
