@@ -70,13 +70,19 @@ pub fn render_slices(
         // texels.
         Method::Deterministic => {
             let references = opts.only.is_none().then_some((&opts.cache, bake.fog.ceiling_km));
-            let (strips, fog) = render_strips(&plan, &sessions, opts.quality, references, &tracker, &cancel)?;
+            let s = render_strips(&plan, &sessions, opts.quality, references, &tracker, &cancel)?;
+            let mut forecasts = Forecasts::zero(&plan.skies);
+            for (k, priced) in s.fog_after.iter().enumerate() {
+                for &(index, core_seconds) in priced {
+                    forecasts.fog_after[k][index] = core_seconds;
+                }
+            }
             let rendered = Rendered {
-                grids: strips.iter().map(|_| Default::default()).collect(),
-                strips,
-                fog: fog.into_iter().map(std::sync::Mutex::new).collect(),
+                grids: s.strips.iter().map(|_| Default::default()).collect(),
+                strips: s.strips,
+                fog: s.fogs.into_iter().map(std::sync::Mutex::new).collect(),
             };
-            (Forecasts::zero(&plan.skies), rendered)
+            (forecasts, rendered)
         }
     };
     drop(sessions);

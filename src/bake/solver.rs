@@ -148,6 +148,19 @@ fn sky_job<'a>(
     Some(SkyJob { sky, all, strip: !views.is_empty(), first_reference, verify, slices, resolution })
 }
 
+/// What `render_strips` rendered: per basis sky its strip, its fog
+/// slices, and the forecast of each fog slice's quadrature after them
+/// ((index, core-seconds)).
+pub(super) struct Strips {
+    pub strips: Vec<Option<StripOutcome>>,
+    pub fogs: Vec<FogRenders>,
+    pub fog_after: Vec<Vec<(usize, f64)>>,
+}
+
+/// One part in this many of a sky's views is finished to price the
+/// finish: about 1 % of the bake's time spent on the forecast.
+const FINISH_PRICE_STRIDE: usize = 8;
+
 /// Every basis sky's strip of the slices to render (None for a sky with
 /// none) and its fog slices to render, solved at the resolution of
 /// `quality` and the sky's preset. With `references` (the cache and the
@@ -157,8 +170,11 @@ fn sky_job<'a>(
 ///
 /// The forecast: first one wavelength of every sky (its middle band
 /// node), timed (the "solver's pilots"); each sky's other wavelengths are
-/// forecast to cost what its pilot did. Then sky after sky the rest, its
-/// pilot's light kept.
+/// forecast to cost what its pilot did, and the per-texel work after them
+/// (`Staged::finish`) what an eighth of it costs with the pilot's light
+/// (`Staged::price_finish`). Then sky after sky the rest, its pilot's
+/// light kept. The Fog's quadrature after the solutions is priced on an
+/// eighth of the fog slices too.
 pub(super) fn render_strips(
     plan: &Plan,
     sessions: &[Option<Session>],
@@ -166,7 +182,7 @@ pub(super) fn render_strips(
     references: Option<(&SliceCache, f64)>,
     tracker: &Mutex<Tracker>,
     cancel: &AtomicBool,
-) -> Result<(Vec<Option<StripOutcome>>, Vec<FogRenders>), BakeError> {
+) -> Result<Strips, BakeError> {
     let jobs: Vec<Option<SkyJob>> = (0..plan.skies.len())
         .map(|k| sessions[k].as_ref().and_then(|_| sky_job(plan, k, quality, references)))
         .collect();
@@ -185,9 +201,10 @@ pub(super) fn render_strips(
     let start = Instant::now();
     tracker.lock().unwrap().planning = true;
     let count = staged.iter().flatten().count();
-    let mut pilots: Vec<Option<(WavelengthId, SolvedWavelength, f64)>> = Vec::new();
-    for (job, stage) in jobs.iter().zip(&staged) {
-        let (Some(job), Some(stage)) = (job, stage) else {
+    let mut pilots: Vec<Option<(WavelengthId, SolvedWavelength, (f64, f64))>> = Vec::new();
+    let mut fog_after: Vec<Vec<(usize, f64)>> = vec![Vec::new(); jobs.len()];
+    for (k, (job, stage)) in jobs.iter().zip(&staged).enumerate() {
+        let (Some(job), Some(stage), Some(session)) = (job, stage, &sessions[k]) else {
             pilots.push(None);
             continue;
         };
@@ -199,13 +216,25 @@ pub(super) fn render_strips(
         let t0 = Instant::now();
         let light = stage.solve(id);
         let core_seconds = t0.elapsed().as_secs_f64() * threads;
-        let forecast = core_seconds * (ids.len() - 1) as f64;
-        pilots.push(Some((id, light, forecast)));
+        // The other wavelengths at the pilot's cost (within 15 % of it
+        // for clear.toml and cloudy3.toml's draft nodes, 400 to 720 nm),
+        // and the per-texel work after them, priced on an eighth of it.
+        let finish = stage.price_finish(&light, FINISH_PRICE_STRIDE);
+        let forecast = core_seconds * (ids.len() - 1) as f64 + finish;
+        pilots.push(Some((id, light, (forecast, core_seconds))));
+        // The Fog's single scattering, added by quadrature after the
+        // solutions (a whole bake's: not a part's), timed on an eighth of
+        // the fog slices.
+        if references.is_some() {
+            fog_after[k] = price_fog_quadrature(&session.scene, &plan.fog[k]);
+        }
+        let sky_total = forecast + fog_after[k].iter().map(|f| f.1).sum::<f64>();
         let done = pilots.iter().flatten().count();
         let t = tracker.lock().unwrap();
-        t.planned_one("solver's pilots", start, (&job.sky, 0, false), (done, count), Some(forecast));
+        t.planned_one("solver's pilots", start, (&job.sky, 0, false), (done, count), Some(sky_total));
     }
-    let total: f64 = pilots.iter().flatten().map(|p| p.2).sum();
+    let total: f64 =
+        pilots.iter().flatten().map(|p| p.2 .0).sum::<f64>() + fog_after.iter().flatten().map(|f| f.1).sum::<f64>();
     tracker.lock().unwrap().forecast("solver's pilots", start, (total, 0), 0);
     let (mut strips, mut fogs) = (Vec::new(), Vec::new());
     for (k, ((job, stage), pilot)) in jobs.iter().zip(&staged).zip(pilots).enumerate() {
@@ -221,7 +250,17 @@ pub(super) fn render_strips(
         strips.push(strip);
         fogs.push(fog);
     }
-    Ok((strips, fogs))
+    Ok(Strips { strips, fogs, fog_after })
+}
+
+/// Each fog slice's (index, core-seconds) of the quadrature that adds the
+/// Fog's single scattering after the solutions: every
+/// `FINISH_PRICE_STRIDE`-th slice timed, each slice priced at their mean.
+fn price_fog_quadrature(scene: &crate::render::Scene, fog: &[super::fog::FogTodo]) -> Vec<(usize, f64)> {
+    let timed: Vec<f64> =
+        fog.iter().step_by(FINISH_PRICE_STRIDE).map(|f| super::fog::time_quadrature(scene, &f.view)).collect();
+    let mean = timed.iter().sum::<f64>() / timed.len().max(1) as f64;
+    fog.iter().map(|f| (f.index, mean)).collect()
 }
 
 /// One basis sky's rest of `render_strips`: its wavelengths but the
@@ -229,7 +268,7 @@ pub(super) fn render_strips(
 fn render_sky(
     job: &SkyJob,
     stage: &Staged,
-    (pilot, pilot_light, forecast): (WavelengthId, SolvedWavelength, f64),
+    (pilot, pilot_light, (forecast, pilot_core_seconds)): (WavelengthId, SolvedWavelength, (f64, f64)),
     fog: &[super::fog::FogTodo],
     tracker: &Mutex<Tracker>,
 ) -> Result<(Option<StripOutcome>, FogRenders), BakeError> {
@@ -238,28 +277,34 @@ fn render_sky(
     tracker.lock().unwrap().start_queue(QueueJob::new(job.slices.clone(), &shares), 0);
     let rest: Vec<WavelengthId> = stage.wavelengths().into_iter().filter(|&id| id != pilot).collect();
     let done = AtomicUsize::new(0);
+    let solves = pilot_core_seconds * rest.len() as f64;
+    let solved_share = if forecast > solves { solves / forecast } else { 1.0 };
     let start = Instant::now();
     let mut solved: Vec<(WavelengthId, SolvedWavelength)> = rest
         .par_iter()
         .map(|&id| {
             let light = stage.solve(id);
-            let d = done.fetch_add(1, Ordering::SeqCst) as u64 + 1;
+            let d = done.fetch_add(1, Ordering::SeqCst) as f64 + 1.0;
             let mut t = tracker.lock().unwrap();
-            let progress = t.progress(texels * d / rest.len().max(1) as u64, None);
+            // The solutions' share of the sky's forecast; the finish is the rest.
+            let progress = t.progress((texels as f64 * solved_share * d / rest.len().max(1) as f64) as u64, None);
             t.emit(BakeEvent::Progress(progress));
             (id, light)
         })
         .collect();
     solved.push((pilot, pilot_light));
     let mut images = stage.finish(solved);
+    {
+        let mut t = tracker.lock().unwrap();
+        let progress = t.progress(texels, None);
+        t.emit(BakeEvent::Progress(progress));
+    }
     if let Some((cache, key)) = &job.verify {
         super::references::store(cache, key, &images[job.first_reference..])?;
     }
     images.truncate(job.first_reference);
     let mut images = images.into_iter();
-    // The cost shared by texels: the pilot's (a share of the forecast's)
-    // and the rest's.
-    let pilot_core_seconds = forecast / rest.len().max(1) as f64;
+    // The cost shared by texels: the pilot's and the rest's.
     let core_seconds = start.elapsed().as_secs_f64() * rayon::current_num_threads() as f64 + pilot_core_seconds;
     let per_texel = core_seconds / texels.max(1) as f64;
     let strip = job.strip.then(|| images.next().expect("the strip's image")).map(|image| {

@@ -242,6 +242,7 @@ fn pixel_radiances(columns: &Columns, sun_zenith_rad: f64, rays: &[PixelRay]) ->
 /// irradiance: the diffuse light reaching the ground on a grid of view
 /// cosines and azimuths, the ground's irradiance, the beam's transmittance
 /// to the ground, the ground's albedo.
+#[derive(Clone)]
 pub(super) struct Wavelength {
     pub(super) diffuse: DiffuseLight,
     pub(super) ground_irradiance: f64,
@@ -250,6 +251,7 @@ pub(super) struct Wavelength {
 }
 
 /// The light scattered twice or more that reaches the ground.
+#[derive(Clone)]
 pub(super) enum DiffuseLight {
     /// `[k][p]`: at view cosine node k and azimuth node p.
     Table(Vec<Vec<f64>>),

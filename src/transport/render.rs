@@ -34,6 +34,8 @@ use glam::DVec3;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 
+mod price;
+
 /// The solver's resolutions.
 pub use super::light::{wavelengths_solved, AZIMUTH_INTERVALS, BAKE_VIEW_GRID, DRAFT_VIEW_GRID, VIEW_NODES};
 
