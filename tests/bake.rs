@@ -1148,6 +1148,7 @@ fn lut_verify_reports_every_elevation() {
         // ambient irradiance reported wherever the reference is lit.
         for x in e.iter().filter(|x| x["sun_elevation_deg"].as_f64().unwrap() >= 3.0) {
             assert!(x["sun_rel_y"].as_f64().is_some_and(|v| v < 0.01), "{x}");
+            assert_eq!(x["sun_below_format_floor"], false, "the slabs let the sun through: {x}");
             assert!(x["ambient_rel_y"].as_f64().is_some_and(f64::is_finite), "{x}");
         }
         // The references by default: the transport solver's, no noise

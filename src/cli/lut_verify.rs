@@ -229,10 +229,16 @@ fn print_summaries(report: &[SkyVerification]) {
                 v.len()
             )
         };
+        let under = s.elevations.iter().filter(|e| e.sun_below_format_floor).count();
         outln!(
-            "{} sun (decoded irradiance against the optics' column table): {}",
+            "{} sun (decoded irradiance against the optics' column table): {}{}",
             s.sky,
-            summary(s.elevations.iter().filter_map(|e| e.sun_rel_y).collect())
+            summary(s.elevations.iter().filter_map(|e| e.sun_rel_y).collect()),
+            if under > 0 {
+                format!("; at {under} more the transmittance is below the file's RGBA16F floor (2^-24: the direct sun under 6e-8 of its top-of-atmosphere irradiance) and decodes as 0")
+            } else {
+                String::new()
+            }
         );
         outln!(
             "{} ambient (decoded upward irradiance against the reference render integrated over its lattice): {}",

@@ -104,6 +104,11 @@ pub struct ElevationError {
     /// table, what the renderer's direct sun uses: |ΔY| / Y (None with the
     /// sun below the horizon or a bake without a transmittance file).
     pub sun_rel_y: Option<f64>,
+    /// The sun's transmittance to the observer below what the
+    /// transmittance file's RGBA16F holds (2^-24, its smallest subnormal;
+    /// behind thick cloud or at the horizon), decoded as 0: then
+    /// `sun_rel_y` is None (it would read 100 %) and this is true.
+    pub sun_below_format_floor: bool,
     /// The decoded ambient irradiance on an upward surface against a direct
     /// integration of the reference render over its lattice (uniform in
     /// solid angle above 0.5° elevation): |ΔY| / Y (None without ambient
@@ -295,7 +300,11 @@ pub fn verify(
                 peak = peak.max(x[1]);
             }
             let n = rel.len().max(1) as f64;
-            let sun_rel_y = sun_error(luts, entry, &session, sky.altitude_m, elev);
+            let (sun_rel_y, sun_below_format_floor) = match sun_error(luts, entry, &session, sky.altitude_m, elev) {
+                Some(SunError::BelowFloor) => (None, true),
+                Some(SunError::Relative(e)) => (Some(e), false),
+                None => (None, false),
+            };
             let ambient_rel_y = ambient_error(luts, entry, &dirs, &reference, elev);
             let mut ref_rel: Vec<f64> =
                 image.pixels.iter().filter(|p| p.xyz[1] > 0.0).map(|p| p.xyz_stderr[1] / p.xyz[1]).collect();
@@ -327,6 +336,7 @@ pub fn verify(
                     direction_only_p99_rel_y: direction.p99,
                 }),
                 sun_rel_y,
+                sun_below_format_floor,
                 ambient_rel_y,
             });
         }
@@ -353,14 +363,21 @@ fn y_of(luts: &Luts, rgb: [f64; 3]) -> f64 {
     crate::colour::apply(&luts.manifest.colour.xyz_from_rgb, rgb)[1]
 }
 
-/// See [`ElevationError::sun_rel_y`].
+/// The decoded sun against the reference: a relative error, or decoded
+/// as 0 where the file cannot hold the transmittance.
+enum SunError {
+    Relative(f64),
+    BelowFloor,
+}
+
+/// See [`ElevationError::sun_rel_y`] and `sun_below_format_floor`.
 fn sun_error(
     luts: &Luts,
     entry: &crate::lut::manifest::SkyEntry,
     session: &Session,
     altitude_m: f64,
     elevation_deg: f64,
-) -> Option<f64> {
+) -> Option<SunError> {
     if elevation_deg <= 0.0 {
         return None;
     }
@@ -370,7 +387,16 @@ fn sun_error(
     let t = luts.sun_transmittance(i, altitude_m / 1000.0, mu)?;
     let decoded = y_of(luts, std::array::from_fn(|c| top[c] * t[c]));
     let want = crate::bake::tables::sun_xyz_at(&session.scene, altitude_m / 1000.0, mu)[1];
-    (want > 0.0).then(|| (decoded - want).abs() / want)
+    if !(want > 0.0) {
+        return None;
+    }
+    // Only a 0 where the true transmittance is under the floor counts as
+    // the format's; a 0 above it stays a 100 % error.
+    let floor = 2f64.powi(-24);
+    if decoded == 0.0 && want < floor * y_of(luts, top) {
+        return Some(SunError::BelowFloor);
+    }
+    Some(SunError::Relative((decoded - want).abs() / want))
 }
 
 /// See [`ElevationError::ambient_rel_y`].
