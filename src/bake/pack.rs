@@ -205,11 +205,10 @@ fn write_transmittance(
     let m = colour.xyz_to_rgb();
     let mut halves = Vec::with_capacity(transmittance::WIDTH * transmittance::HEIGHT * lightings.len());
     for (k, l) in lightings.iter().enumerate() {
-        for (i, t) in l.transmittance.channel_texels(&m).into_iter().enumerate() {
-            let h = rgba16f::pack_signed(t.map(transmittance::optical_depth))
-                .map_err(|e| BakeError::Write(format!("{}: transmittance texel {i}: {e}", skies[k].sky.name)))?;
-            halves.push(h);
-        }
+        let (packed, _) = rgba16f::pack_array(&l.transmittance.channel_texels(&m)).map_err(|e| {
+            BakeError::Write(format!("{}: transmittance texel {}: {}", skies[k].sky.name, e.texel, e.source))
+        })?;
+        halves.extend(packed);
         if let Some(sun) = &mut entries[k].sun {
             sun.transmittance_layer = k;
         }
@@ -227,8 +226,7 @@ fn write_transmittance(
             "Bruneton 2017 (GetTransmittanceTextureUvFromRMu): R = {} km, R_top = {} km, H = sqrt(R_top^2 - R^2), rho = sqrt(r^2 - R^2), d = distance to R_top along mu; x_r = rho / H, x_mu = (d - d_min) / (d_max - d_min), d_min = R_top - r, d_max = rho + H; texel i of n holds x = i / (n - 1) (u = 0.5 / n + x (1 - 1 / n)); below mu = -rho / r the ray meets the ground: 0",
             t.bottom_radius_km, t.top_radius_km
         ),
-        channels: "RGB: the optical depth -ln T (T = exp(-texel), interpolate the depth, not T) of the transmittance T of the sun's own spectrum to the top of the atmosphere per channel of the manifest's colour space (irradiance = sun.top_irradiance_rgb * T); a channel the sun's colour leaves the space's gamut in (blue, with the sun within a degree or two of the horizon, in Rec.709), or no light at all, holds 65504 (T = 0); A = 1".into(),
-        encoding: Some(transmittance::OPTICAL_DEPTH.into()),
+        channels: "RGB: the transmittance of the sun's own spectrum to the top of the atmosphere per channel of the manifest's colour space (irradiance = sun.top_irradiance_rgb * T); a channel the sun's colour leaves the space's gamut in (blue, with the sun within a degree or two of the horizon, in Rec.709) is 0; A = 1".into(),
     };
     let json = serde_json::to_string(&entry).expect("an entry always serialises");
     let tex = ArrayTexture {

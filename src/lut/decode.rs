@@ -341,14 +341,7 @@ impl Luts {
         let e = &self.manifest.skies[sky];
         let layer = self.transmittance.get(e.sun.as_ref()?.transmittance_layer)?;
         let mapping = super::transmittance::TransmittanceMapping::new(e.planet_radius_km, e.top_km);
-        let texel = |i: usize| layer[i].map(f64::from);
-        let encoding = self.manifest.transmittance.as_ref()?.encoding.as_deref();
-        Some(match encoding {
-            Some(super::transmittance::OPTICAL_DEPTH) => {
-                super::transmittance::sample_optical_depth(&mapping, texel, altitude_km, mu)
-            }
-            _ => super::transmittance::sample(&mapping, texel, altitude_km, mu),
-        })
+        Some(super::transmittance::sample(&mapping, |i| layer[i].map(f64::from), altitude_km, mu))
     }
 
     /// Ambient light from the sky for a sun at `sun_elevation_deg`: each

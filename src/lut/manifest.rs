@@ -187,11 +187,6 @@ pub struct TransmittanceEntry {
     pub mapping: String,
     /// What the channels hold.
     pub channels: String,
-    /// "optical_depth": the texels hold -ln T, T = exp(-texel), so that
-    /// RGBA16F keeps T's relative error under tau * 2^-11 however small T
-    /// is (added within version 2; absent: the texels hold T, as before).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub encoding: Option<String>,
 }
 
 /// The sun of one basis sky: what the sky texture leaves out.

@@ -133,35 +133,6 @@ pub fn sample(mapping: &TransmittanceMapping, texel: impl Fn(usize) -> [f64; 3],
     std::array::from_fn(|k| (1.0 - ay) * ((1.0 - ax) * a[k] + ax * b[k]) + ay * ((1.0 - ax) * c[k] + ax * d[k]))
 }
 
-/// The manifest's name of the optical-depth encoding of the
-/// transmittance file (`TransmittanceEntry::encoding`).
-pub const OPTICAL_DEPTH: &str = "optical_depth";
-
-/// -ln T as stored: a T of 0 (a channel out of the colour space's gamut,
-/// or no light at all) as binary16's largest finite value, exp(-65504) = 0.
-pub fn optical_depth(t: f64) -> f64 {
-    if t > 0.0 {
-        (-t.ln()).min(super::rgba16f::MAX)
-    } else {
-        super::rgba16f::MAX
-    }
-}
-
-/// T from a table of optical depths: bilinear in the depth (exact for a
-/// depth linear between texel centres, where T is exponential), then
-/// exp(-depth); 0 below the ray that grazes the ground.
-pub fn sample_optical_depth(
-    mapping: &TransmittanceMapping,
-    depth: impl Fn(usize) -> [f64; 3],
-    z_km: f64,
-    mu: f64,
-) -> [f64; 3] {
-    if mu < mapping.mu_horizon(mapping.bottom_radius_km + z_km.max(0.0)) {
-        return [0.0; 3];
-    }
-    sample(mapping, depth, z_km, mu).map(|d| (-d).exp())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -188,51 +159,5 @@ mod tests {
         let (r, mu) = m.r_mu(1.0, 0.4);
         assert!((mu - m.mu_horizon(r)).abs() < 1e-12);
         assert!((m.r_mu(0.3, 0.0).0 - 6371.0).abs() < 1e-9 && (m.r_mu(0.3, 1.0).0 - 6471.0).abs() < 1e-9);
-    }
-
-    /// Stored as optical depth in RGBA16F, a transmittance reads back at
-    /// texel centres within tau * 2^-11 of itself (half a binary16 step of
-    /// tau: 1 % up to tau = 20), down to T = 1e-17 (tau 40, where linear T in RGBA16F, floor
-    /// 2^-24 = 6e-8, reads 0); T = 0 stays 0, and below the grazing ray 0.
-    #[test]
-    fn optical_depths_keep_small_transmittances() {
-        let m = TransmittanceMapping::new(6371.0, 100.0);
-        // Depth growing across the table from 0.01 to 40 (a cloud slab's
-        // slant paths), a channel of T = 0 (out of gamut).
-        let tau = |i: usize| {
-            0.01 + 40.0 * (i % WIDTH) as f64 / (WIDTH - 1) as f64 * (1.0 + (i / WIDTH) as f64 / HEIGHT as f64) / 2.0
-        };
-        let stored: Vec<[u16; 4]> = (0..WIDTH * HEIGHT)
-            .map(|i| {
-                super::super::rgba16f::pack_signed([(-tau(i)).exp(), 0.5 * (-tau(i)).exp(), 0.0].map(optical_depth))
-                    .unwrap()
-            })
-            .collect();
-        let texel = |i: usize| {
-            let v = super::super::rgba16f::unpack(stored[i]);
-            [v[0], v[1], v[2]].map(f64::from)
-        };
-        let (mut worst, mut smallest) = (0.0f64, 1.0f64);
-        for j in [0, 17, HEIGHT - 1] {
-            // (Not the last column: the grazing ray itself, where rounding may put
-            // the ray a hair below the horizon.)
-            for i in (0..WIDTH - 1).step_by(5) {
-                let (r, mu) = m.r_mu(i as f64 / (WIDTH - 1) as f64, j as f64 / (HEIGHT - 1) as f64);
-                let t = sample_optical_depth(&m, texel, r - 6371.0, mu.min(1.0));
-                let (want, k) = ((-tau(j * WIDTH + i)).exp(), j * WIDTH + i);
-                let rel = (t[0] - want).abs() / want;
-                assert!(
-                    rel <= tau(k) * 2f64.powi(-11) * 1.001 + 1e-9,
-                    "texel {k}: T {} against {want} ({rel:e})",
-                    t[0]
-                );
-                assert!(((t[1] - 0.5 * want) / (0.5 * want)).abs() < 0.021, "texel {k}: half of T");
-                assert_eq!(t[2], 0.0, "a T of 0 stays 0");
-                worst = worst.max(rel);
-                smallest = smallest.min(want);
-            }
-        }
-        assert!(smallest < 1e-16 && worst > 0.0, "{smallest} {worst}");
-        assert_eq!(sample_optical_depth(&m, texel, 0.0, -0.5), [0.0; 3], "below the grazing ray");
     }
 }
