@@ -6,23 +6,15 @@
 //! R11G11B10's rounding, and `sky lut sample` gives the same answer from
 //! both containers and answers within that rounding across the formats.
 
+use crate::common::sky;
 use crate::ktx_readers::ktx_parse;
 use serde_json::Value;
 use sky::lut::{r11g11b10, rgba16f};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn sky(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(args)
-        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
-        .output()
-        .unwrap()
 }
 
 const FORMATS: [&str; 2] = ["r11g11b10", "rgba16f"];

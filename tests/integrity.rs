@@ -3,20 +3,13 @@
 //! reads a bake refuse a missing, truncated or altered file (the manifest
 //! included) with an error that names it, exit 1, and print no number.
 
+use crate::common::sky;
 use crate::common::SplitMix64 as Rng;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn sky(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_sky"))
-        .args(args)
-        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
-        .output()
-        .unwrap()
 }
 
 /// How a file is damaged.

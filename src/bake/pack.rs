@@ -68,8 +68,7 @@ pub fn pack_sky(
     (format, container): (TextureFormat, Container),
 ) -> Result<PackedSky, BakeError> {
     let (w, h) = (s.sky.width, s.sky.height);
-    let mut texels: Option<Packed> = None;
-    let mut stats = PackStats::default();
+    let mut scaled = Vec::with_capacity(w * h * s.slices.len());
     let mut negative = 0;
     let mut slices = Vec::new();
     for (index, slice) in s.slices.iter().enumerate() {
@@ -79,19 +78,7 @@ pub fn pack_sky(
         let max = rgb.iter().flatten().copied().filter(|v| v.is_finite()).fold(0.0, f64::max);
         let k = slice_scale_log2(max);
         let scale = (k as f64).exp2();
-        let scaled: Vec<[f64; 3]> = rgb.iter().map(|p| p.map(|c| c * scale)).collect();
-        let (packed, st) = container::pack_array(format, &scaled).map_err(|e| BakeError::NotFinite {
-            sky: s.sky.name.clone(),
-            index,
-            u: e.texel % w,
-            v: e.texel / w,
-            what: "RGB",
-        })?;
-        match &mut texels {
-            Some(t) => t.extend(packed),
-            None => texels = Some(packed),
-        }
-        stats.merge(&st);
+        scaled.extend(rgb.iter().map(|p| p.map(|c| c * scale)));
         let rel: Vec<f64> =
             slice.xyz.iter().zip(&slice.xyz_stderr).filter(|(x, _)| x[1] > 0.0).map(|(x, e)| e[1] / x[1]).collect();
         slices.push(SliceEntry {
@@ -114,7 +101,15 @@ pub fn pack_sky(
             ambient::of_slice(&slice.xyz, w, h, &m).transformed(&to_rgb)
         })
         .collect();
-    let texels = texels.ok_or_else(|| BakeError::Write(format!("{}: no slice to pack", s.sky.name)))?;
+    // Every slice at once, layer after layer; a texel that is not finite
+    // named by its slice and (u, v).
+    let (texels, stats) = container::pack_array(format, &scaled).map_err(|e| BakeError::NotFinite {
+        sky: s.sky.name.clone(),
+        index: e.texel / (w * h),
+        u: e.texel % w,
+        v: (e.texel % (w * h)) / w,
+        what: "RGB",
+    })?;
     let entry = SkyEntry {
         name: s.sky.name.clone(),
         file: container.file_name(&s.sky.name),

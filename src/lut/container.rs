@@ -53,6 +53,14 @@ impl TextureFormat {
         }
     }
 
+    /// Bytes of one texel.
+    pub fn texel_bytes(self) -> usize {
+        match self {
+            TextureFormat::R11g11b10 => 4,
+            TextureFormat::Rgba16f => 8,
+        }
+    }
+
     pub fn vk_format(self) -> u32 {
         match self {
             TextureFormat::R11g11b10 => VK_FORMAT_B10G11R11_UFLOAT_PACK32,
@@ -143,15 +151,6 @@ impl Packed {
             Packed::Rgba16f(h) => Texels::Rgba16f(h),
         }
     }
-
-    /// Appends `other` (of the same format).
-    pub fn extend(&mut self, other: Packed) {
-        match (self, other) {
-            (Packed::B10G11R11(a), Packed::B10G11R11(b)) => a.extend(b),
-            (Packed::Rgba16f(a), Packed::Rgba16f(b)) => a.extend(b),
-            _ => unreachable!("one format per texture"),
-        }
-    }
 }
 
 /// Packs non-negative linear RGB in `format`, each channel rounded once
@@ -222,12 +221,9 @@ pub fn read(container: Container, path: &Path) -> Result<Level, String> {
         Container::Ktx2 => read_ktx2(&bytes)?,
         Container::Dds => read_dds(&bytes)?,
     };
-    let texel_bytes = match TextureFormat::of_vk_format(level.vk_format) {
-        Some(TextureFormat::R11g11b10) => 4,
-        Some(TextureFormat::Rgba16f) => 8,
-        None => return Err(format!("vkFormat {} is not one this build reads (122 or 97)", level.vk_format)),
-    };
-    let expected = texel_bytes * level.width * level.height * level.layers;
+    let format = TextureFormat::of_vk_format(level.vk_format)
+        .ok_or_else(|| format!("vkFormat {} is not one this build reads (122 or 97)", level.vk_format))?;
+    let expected = format.texel_bytes() * level.width * level.height * level.layers;
     if level.data.len() != expected {
         return Err(format!("level 0 holds {} bytes, not {expected}", level.data.len()));
     }

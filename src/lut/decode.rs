@@ -216,26 +216,21 @@ impl Luts {
 }
 
 /// The layers of a 2-D array texture file in `container` of `width` ×
-/// `height` × `layers` texels in one of `vk_formats`, RGB, row-major;
-/// checked against those sizes ([`super::container::read`]).
+/// `height` × `layers` texels of `vk_format`, RGB, row-major; checked
+/// against those ([`super::container::read`]).
 pub(crate) fn read_rgb_array(
     path: &std::path::Path,
     container: super::container::Container,
-    vk_formats: &[u32],
+    vk_format: u32,
     (width, height, layers): (usize, usize, usize),
 ) -> Result<Vec<Vec<[f32; 3]>>, LoadError> {
     let level = super::container::read(container, path).map_err(|m| load_error(path, m))?;
-    if !vk_formats.contains(&level.vk_format) || (level.width, level.height, level.layers) != (width, height, layers) {
-        let formats: Vec<String> = vk_formats.iter().map(u32::to_string).collect();
+    if level.vk_format != vk_format || (level.width, level.height, level.layers) != (width, height, layers) {
         return Err(load_error(
             path,
             format!(
-                "vkFormat {}, {} x {} x {} layers; the manifest says vkFormat {}, {width} x {height} x {layers} layers",
-                level.vk_format,
-                level.width,
-                level.height,
-                level.layers,
-                formats.join(" or ")
+                "vkFormat {}, {} x {} x {} layers; the manifest says vkFormat {vk_format}, {width} x {height} x {layers} layers",
+                level.vk_format, level.width, level.height, level.layers
             ),
         ));
     }
@@ -297,7 +292,7 @@ impl Luts {
         let dir = manifest_path.parent().unwrap_or(std::path::Path::new("."));
         let container = super::container::Container::of_manifest(manifest.container.as_deref())
             .map_err(|m| load_error(manifest_path, format!("container: {m}")))?;
-        const HALVES: &[u32] = &[super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT];
+        const HALVES: u32 = super::ktx2::VK_FORMAT_R16G16B16A16_SFLOAT;
         let mut textures = Vec::new();
         for e in &manifest.skies {
             let path = dir.join(&e.file);
@@ -307,7 +302,7 @@ impl Luts {
                     format!("{} layers but {} slices in the manifest", e.layers, e.slices.len()),
                 ));
             }
-            let layers = read_rgb_array(&path, container, &[e.vk_format], (e.width, e.height, e.layers))?;
+            let layers = read_rgb_array(&path, container, e.vk_format, (e.width, e.height, e.layers))?;
             textures.push(Texture { width: e.width, height: e.height, layers });
         }
         let mut transmittance = Vec::new();

@@ -5,6 +5,16 @@
 
 pub use sky::stats::Family;
 
+/// Runs the `sky` binary with `args`, the Mie tables from the tests' shared
+/// cache, and waits for its output.
+pub fn sky(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sky"))
+        .args(args)
+        .env("SKY_CACHE_DIR", sky::mie::MieCache::test_dir())
+        .output()
+        .unwrap()
+}
+
 /// A small deterministic generator for test mutations (SplitMix64, Steele,
 /// Lea and Flood 2014), so a failing case reproduces from its seed.
 pub struct SplitMix64(pub u64);
