@@ -1,19 +1,32 @@
-// The basis-sky LUTs decoded on the GPU: a transcription of the CPU
-// reference decoder (src/lut/decode.rs `sample_sky`, src/lut/mapping.rs
-// `DirectionMapping::uv_in_region`), tested against it by readback
-// (src/preview/sky_pass.rs). What a frame shares is computed once on the
-// CPU and passed in `params`: each active basis sky's weight (the weather
-// rule, `lut::weather::basis_weights`, renormalised over the bake's skies),
-// its two slices, their scales (2^-scale_log2) and regions, and the
-// fraction between them. The shader does the per-direction work: the
-// direction mapping of the actual sun, bilinear filtering at texel centres
-// with clamp-to-edge (done by hand with textureLoad, in f32, so that it is
-// the CPU's arithmetic and not the sampler's fixed-point weights), the
-// geometric blend between slices and the sum over basis skies.
+// The basis-sky LUTs decoded on the GPU, in two passes.
 //
-// One invocation per direction: `directions[i].xyz` is a unit vector in
-// the world frame (z up), `.w` is 1 where the pixel sees the sky and 0
-// outside the camera's view; `radiance[i].rgb` is linear RGB of the
+// The composition (`compose`, run when the sun's elevation or the weather
+// changes) decodes the bake into one frame sky texture (4 texels a LUT
+// texel each way, `sky_pass::FRAME_SKY_OVERSAMPLING`): per texel, the
+// direction of its centre in the mapping of the actual sun, decoded as the
+// CPU reference decoder does (src/lut/decode.rs `sample_sky`,
+// src/directions/mapping.rs `DirectionMapping::uv_in_region`): each active
+// basis sky's two slices, bilinear filtering at texel centres with
+// clamp-to-edge done by hand with textureLoad in f32 (the CPU's arithmetic,
+// not the sampler's fixed-point weights), the geometric blend between
+// slices and the weather rule's sum. What a frame shares is computed once
+// on the CPU and passed in `params`: each active sky's weight
+// (`lut::weather::basis_weights`, renormalised over the bake's skies), its
+// two slices, their scales (2^-scale_log2) and regions, and the fraction
+// between them; the mapping's trigonometry of the sun.
+//
+// The sky pass (`sky`, every frame) reads that texture once per direction:
+// the direction's (u, v) in the same mapping, one sample with the
+// sampler's bilinear filtering, and the sun's disk on top. Its value is a
+// convex combination of the CPU decoder's values at the four texel centres
+// around the direction, each to the half float's rounding (the test in
+// tests/preview.rs); against the CPU decoder's value at the direction
+// itself it adds the resampling error of a bilinear of bilinears (measured
+// at FRAME_SKY_OVERSAMPLING).
+//
+// The sky pass: one invocation per direction. `directions[i].xyz` is a unit
+// vector in the world frame (z up), `.w` is 1 where the pixel sees the sky
+// and 0 outside the camera's view; `radiance[i].rgb` is linear RGB of the
 // manifest's colour space.
 
 const PI: f32 = 3.14159265358979;
@@ -25,7 +38,12 @@ const KC: f32 = 0.25;
 const KD: f32 = 0.50;
 
 // header: (sun zenith, radians, clamped to [0, 100 degrees]; cos and sin of
-// the sun's azimuth; number of active skies). Per active sky k, two rows:
+// the sun's azimuth; number of active skies). frame: the frame sky
+// texture's mapping and scale: (1 for the sun-centred region, 0 for the
+// latitude-longitude one; the scale, value = stored * scale; 1 / scale;
+// 0). mapping: the actual sun's (sin, cos and tan of its zenith angle, the
+// angle itself, radians), as in header, worked out in f64. Per active sky
+// k, two rows:
 // sky[2k] = (weight, fraction between slices, layer 0, layer 1),
 // sky[2k + 1] = (scale 0, scale 1, slice 0 sun-centred (1) or not (0),
 // slice 1 likewise). The sun's disk (decode::Luts::decode_image's, from the
@@ -36,6 +54,8 @@ const KD: f32 = 0.50;
 // fallback, worked out on the CPU); w's bits 0: none.
 struct Params {
     header: vec4<f32>,
+    frame: vec4<f32>,
+    mapping: vec4<f32>,
     sky: array<vec4<f32>, 6>,
     sun: vec4<f32>,
     disk: vec4<f32>,
@@ -43,11 +63,16 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// The sky pass's.
 @group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> radiance: array<vec4<f32>>;
+@group(0) @binding(7) var frame_sky: texture_2d<f32>;
+@group(0) @binding(8) var linear: sampler;
+// The composition's.
 @group(0) @binding(3) var sky0: texture_2d_array<f32>;
 @group(0) @binding(4) var sky1: texture_2d_array<f32>;
 @group(0) @binding(5) var sky2: texture_2d_array<f32>;
+@group(0) @binding(6) var frame_out: texture_storage_2d<rgba16float, write>;
 
 fn texel(k: u32, xy: vec2<i32>, layer: i32) -> vec3<f32> {
     if k == 0u {
@@ -102,6 +127,54 @@ fn lower_v_inverse(vp: f32, theta_sun: f32) -> f32 {
     return k + sqrt(max((1.0 - k) * (1.0 - k) - (1.0 - vp) * (1.0 - vp), 0.0));
 }
 
+// mapping::upper_v.
+fn upper_v(v: f32) -> f32 {
+    if v <= KA {
+        let k = v / KA;
+        return KC * k * k;
+    } else if v <= KB {
+        let k = (v - KB) / (KB - KA);
+        return KC + (KD - KC) * (1.0 - k * k);
+    }
+    let k = (v - KB) / (1.0 - KB);
+    return 1.0 - (1.0 - KD) * sqrt(max(1.0 - k * k, 0.0));
+}
+
+// mapping::lower_v.
+fn lower_v(v: f32, theta_sun: f32) -> f32 {
+    let k = min(theta_sun / PI, 0.5);
+    if v <= k {
+        return sqrt(max(k * k - (v - k) * (v - k), 0.0));
+    }
+    return 1.0 - sqrt(max((1.0 - k) * (1.0 - k) - (v - k) * (v - k), 0.0));
+}
+
+// The angle from the sun to the horizon along a heading whose cosine is
+// `cos_phi` (mapping::horizon_edge).
+fn horizon_edge(cos_phi: f32, tan_theta_sun: f32) -> f32 {
+    return PI / 2.0 - atan(cos_phi * tan_theta_sun);
+}
+
+// DirectionMapping::direction: the direction of texture position uv in
+// the frame with the sun at azimuth 0 (y >= 0).
+fn direction_in_region(uv: vec2<f32>, sun_centred: bool) -> vec3<f32> {
+    let phi = uv.x * PI;
+    if sun_centred {
+        let vp = upper_v(uv.y);
+        let edge = horizon_edge(cos(phi), params.mapping.z);
+        var theta = (vp / 0.5 - 1.0) * (PI - edge) + edge;
+        if vp <= 0.5 {
+            theta = vp / 0.5 * edge;
+        }
+        let s = vec3<f32>(params.mapping.x, 0.0, params.mapping.y);
+        let t = vec3<f32>(params.mapping.y, 0.0, -params.mapping.x);
+        let b = vec3<f32>(0.0, 1.0, 0.0);
+        return normalize(s * cos(theta) + (t * cos(phi) + b * sin(phi)) * sin(theta));
+    }
+    let theta = lower_v(uv.y, params.mapping.w) * PI;
+    return vec3<f32>(sin(theta) * cos(phi), sin(theta) * sin(phi), cos(theta));
+}
+
 // atan2(y, x) for y >= 0, in [0, pi]: on the negative x axis (y = 0) it is
 // pi, as in f64 on the CPU; a GPU's atan2 may not give pi there (lavapipe's
 // gives 0 or -pi: WGSL leaves atan2 at a zero y loosely specified), which
@@ -116,19 +189,29 @@ fn heading(y: f32, x: f32) -> f32 {
 // DirectionMapping::uv_in_region, `d` in the frame with the sun at azimuth
 // 0. Angles from the sun and the zenith are taken with atan2 (the CPU's
 // acos of a dot product, in f32, would lose half its digits near the sun).
-fn uv_in_region(d_in: vec3<f32>, theta_sun: f32, sun_centred: bool) -> vec2<f32> {
-    let d = normalize(vec3<f32>(d_in.x, abs(d_in.y), d_in.z));
+// Every angle here is a ratio of components, so `d` need not be of unit
+// length (the CPU normalises it).
+fn uv_in_region(d_in: vec3<f32>, sun_centred: bool) -> vec2<f32> {
+    let d = vec3<f32>(d_in.x, abs(d_in.y), d_in.z);
     if sun_centred {
-        let s = vec3<f32>(sin(theta_sun), 0.0, cos(theta_sun));
-        let t = vec3<f32>(cos(theta_sun), 0.0, -sin(theta_sun));
-        let theta = atan2(length(cross(d, s)), dot(d, s));
+        let s = vec3<f32>(params.mapping.x, 0.0, params.mapping.y);
+        let t = vec3<f32>(params.mapping.y, 0.0, -params.mapping.x);
+        // d's components across the sun (x toward the horizon below it, y
+        // sideways): their length is |d x s|, the sine of the angle from
+        // the sun.
         let x = dot(d, t);
         let y = d.y;
+        let r = length(vec2<f32>(x, y));
+        let theta = atan2(r, dot(d, s));
+        // The heading phi and its cosine (1 on the sun's axis, where the
+        // CPU takes phi = 0).
         var phi = 0.0;
-        if x != 0.0 || y != 0.0 {
+        var cos_phi = 1.0;
+        if r > 0.0 {
             phi = heading(y, x);
+            cos_phi = x / r;
         }
-        let edge = PI / 2.0 - atan(sin(PI / 2.0 - phi) * tan(theta_sun));
+        let edge = horizon_edge(cos_phi, params.mapping.z);
         var vp = 0.5 + 0.5 * (theta - edge) / (PI - edge);
         if theta <= edge {
             vp = 0.5 * theta / edge;
@@ -137,7 +220,7 @@ fn uv_in_region(d_in: vec3<f32>, theta_sun: f32, sun_centred: bool) -> vec2<f32>
     }
     let theta = atan2(length(d.xy), d.z);
     let phi = heading(d.y, d.x);
-    return vec2<f32>(phi / PI, lower_v_inverse(theta / PI, theta_sun));
+    return vec2<f32>(phi / PI, lower_v_inverse(theta / PI, params.mapping.w));
 }
 
 // decode::between_slices: geometric where both are positive.
@@ -150,23 +233,40 @@ fn between(a: f32, b: f32, f: f32) -> f32 {
 
 // decode::sample_sky for active sky k.
 fn sample_sky(k: u32, d: vec3<f32>) -> vec3<f32> {
-    let theta_sun = params.header.x;
     let r0 = params.sky[2u * k];
     let r1 = params.sky[2u * k + 1u];
     let f = r0.y;
-    let a = bilinear(k, i32(r0.z), uv_in_region(d, theta_sun, r1.z > 0.5)) * r1.x;
+    let a = bilinear(k, i32(r0.z), uv_in_region(d, r1.z > 0.5)) * r1.x;
     if f == 0.0 {
         return a;
     }
-    let b = bilinear(k, i32(r0.w), uv_in_region(d, theta_sun, r1.w > 0.5)) * r1.y;
+    let b = bilinear(k, i32(r0.w), uv_in_region(d, r1.w > 0.5)) * r1.y;
     if f == 1.0 {
         return b;
     }
     return vec3<f32>(between(a.x, b.x, f), between(a.y, b.y, f), between(a.z, b.z, f));
 }
 
+// The composition: one invocation per texel of the frame sky texture.
+@compute @workgroup_size(8, 8)
+fn compose(@builtin(global_invocation_id) id: vec3<u32>) {
+    let n = textureDimensions(frame_out);
+    if id.x >= n.x || id.y >= n.y {
+        return;
+    }
+    let uv = (vec2<f32>(id.xy) + 0.5) / vec2<f32>(n);
+    let d = direction_in_region(uv, params.frame.x > 0.5);
+    var rgb = vec3<f32>(0.0);
+    let count = u32(params.header.w);
+    for (var k = 0u; k < count; k++) {
+        rgb += params.sky[2u * k].x * sample_sky(k, d);
+    }
+    textureStore(frame_out, id.xy, vec4<f32>(rgb * params.frame.z, 1.0));
+}
+
+// The sky pass: one invocation per direction, one sample of the frame sky.
 @compute @workgroup_size(64)
-fn decode(@builtin(global_invocation_id) id: vec3<u32>) {
+fn sky(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
     if i >= arrayLength(&directions) {
         return;
@@ -180,16 +280,18 @@ fn decode(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = params.header.y;
     let s = params.header.z;
     let d = vec3<f32>(c * dir.x + s * dir.y, -s * dir.x + c * dir.y, dir.z);
-    var rgb = vec3<f32>(0.0);
-    let count = u32(params.header.w);
-    for (var k = 0u; k < count; k++) {
-        rgb += params.sky[2u * k].x * sample_sky(k, d);
-    }
+    let uv = uv_in_region(d, params.frame.x > 0.5);
+    var rgb = textureSampleLevel(frame_sky, linear, uv, 0.0).rgb * params.frame.y;
     // Inside the disk: within its angular radius of the sun, tested by the
     // sine (a cosine this close to 1 has too few digits in f32).
+    // A cheap test first (within about 30 degrees) leaves the exact one to
+    // the few directions near the sun.
     let toward = params.sun.xyz;
-    if params.disk.w > 0.5 && dot(dir.xyz, toward) > 0.0 && length(cross(dir.xyz, toward)) <= params.sun.w {
-        rgb += params.disk.rgb;
+    let along = dot(dir.xyz, toward);
+    if params.disk.w > 0.5 && along > 0.866 {
+        if length(cross(dir.xyz, toward)) <= params.sun.w {
+            rgb += params.disk.rgb;
+        }
     }
     let point = bitcast<u32>(params.point.w);
     if point != 0u && i == point - 1u {
