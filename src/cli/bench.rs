@@ -118,7 +118,7 @@ pub enum BenchCommand {
     /// converged reference, priced at the measured time per path to 1 %
     /// per texel and summed over the 64 slices
     Bake(super::bench_bake::BenchBakeArgs),
-    /// The GPU preview's passes timed by timestamp queries, the LUT sky pass against a plain textured full-screen pass in the same frames
+    /// The GPU preview's passes timed by wall clock, the LUT sky pass against a plain textured full-screen pass round by round, and the sky pass against the CPU decoder
     Preview(super::bench_preview::BenchPreviewArgs),
     /// The farm's overhead and scaling, in one run: a plain local render (no
     /// coordinator) against the embedded worker and against one `sky worker`

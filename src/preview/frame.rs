@@ -38,6 +38,21 @@ pub struct Frame<'g> {
     queries: Option<wgpu::QuerySet>,
     passes: Vec<&'static str>,
     start: Instant,
+    undo: Undo,
+}
+
+/// What to undo if a frame is dropped before its commands are submitted
+/// (an error on the way): state that a pass recorded as done, such as a
+/// composition the next frames would reuse.
+#[derive(Default)]
+struct Undo(Vec<Box<dyn FnOnce()>>);
+
+impl Drop for Undo {
+    fn drop(&mut self) {
+        for undo in self.0.drain(..) {
+            undo();
+        }
+    }
 }
 
 /// A finished frame, read back.
@@ -92,7 +107,8 @@ impl<'g> Frame<'g> {
         })?;
         let encoder =
             gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("preview frame") });
-        Ok(Frame { gpu, directions, surface, radiance, count, encoder, queries, passes: Vec::new(), start })
+        let (passes, undo) = (Vec::new(), Undo::default());
+        Ok(Frame { gpu, directions, surface, radiance, count, encoder, queries, passes, start, undo })
     }
 
     /// The number of directions.
@@ -129,6 +145,11 @@ impl<'g> Frame<'g> {
         pass.dispatch_workgroups(groups[0], groups[1], groups[2]);
         drop(pass);
         self.passes.push(name);
+    }
+
+    /// Runs `undo` if the frame is dropped before it is submitted.
+    pub fn on_abandoned(&mut self, undo: impl FnOnce() + 'static) {
+        self.undo.0.push(Box::new(undo));
     }
 
     /// A uniform buffer holding `values`.
@@ -176,6 +197,7 @@ impl<'g> Frame<'g> {
         };
         let encoder = self.encoder;
         gpu.checked("preview frame", || gpu.queue.submit([encoder.finish()]))?;
+        self.undo.0.clear();
         let rgb_bytes = map(gpu, &rgb_back)?;
         let surface_bytes = map(gpu, &surface_back)?;
         let seconds = self.start.elapsed().as_secs_f64();

@@ -30,6 +30,8 @@ use crate::lut::r11g11b10::{self, PackError};
 use crate::lut::rgba16f;
 use crate::lut::weather::{basis_weights, BASIS};
 use glam::DVec3;
+use std::cell::RefCell;
+use std::rc::Rc;
 
 /// At most this many basis skies have weight at once (the weather rule's
 /// bound, `basis_weights`).
@@ -84,7 +86,7 @@ pub struct SkyPass {
     sky: wgpu::ComputePipeline,
     /// The composition in the frame sky texture (its parameters' bits), or
     /// None before the first: a frame composes only when this changes.
-    composed: std::cell::RefCell<Option<Vec<u32>>>,
+    composed: Rc<RefCell<Option<Vec<u32>>>>,
 }
 
 /// The frame sky texture's texels per LUT texel, in each direction. Its
@@ -179,7 +181,7 @@ impl SkyPass {
             linear,
         ];
         let (sky_layout, sky) = gpu.compute_pipeline("sky", super::shaders::SKY_DECODE, "sky", &sky_entries)?;
-        let composed = std::cell::RefCell::new(None);
+        let composed = Rc::new(RefCell::new(None));
         Ok(SkyPass { textures, frame_sky, sampler, compose_layout, compose, sky_layout, sky, composed })
     }
 
@@ -196,8 +198,8 @@ impl SkyPass {
 
     /// Records the composition of the frame sky texture for `weather` into
     /// `frame` (timed as "sky composition"), whether or not the texture
-    /// already holds it. A frame recorded must be finished: the next
-    /// frames take the texture as composed.
+    /// already holds it. The frames after take the texture as composed,
+    /// unless this one is dropped before it is submitted.
     pub fn compose(&self, gpu: &Gpu, frame: &mut Frame, luts: &Luts, weather: &Weather) -> Result<(), PreviewError> {
         let (mut params, active) = frame_params(luts, weather)?;
         let key = composition_key(&params, &active);
@@ -223,6 +225,8 @@ impl SkyPass {
         let groups = [size.width.div_ceil(8), size.height.div_ceil(8), 1];
         frame.dispatch_groups("sky composition", &self.compose, &bind, groups);
         *self.composed.borrow_mut() = Some(key);
+        let composed = Rc::clone(&self.composed);
+        frame.on_abandoned(move || *composed.borrow_mut() = None);
         Ok(())
     }
 
@@ -348,9 +352,9 @@ pub(crate) fn active_skies(luts: &Luts, weather: &Weather, usable: impl Fn(&str)
 
 /// The mapping of the frame sky texture under `weather`: that of the
 /// actual sun (a sun below the lowest slice reads as on it), in the region
-/// the first active sky's threshold gives it (the region of the slice
-/// nearer the sun where its two slices straddle the switch); None without
-/// an active sky.
+/// the first active sky's threshold gives the actual sun (where its two
+/// slices straddle the switch, one of them is read across regions); None
+/// without an active sky.
 pub fn frame_mapping(luts: &Luts, weather: &Weather) -> Option<mapping::DirectionMapping> {
     let sun_zenith_deg = (90.0 - weather.sun_elevation_deg).clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG);
     let (first, _) = *active_skies(luts, weather, |_| true).first()?;
