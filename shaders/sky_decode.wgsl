@@ -63,6 +63,9 @@ struct Params {
 }
 
 @group(0) @binding(0) var<uniform> params: Params;
+// The sky pass's region, fixed per pipeline (`sky_pass::SkyPass` builds one
+// of each and picks by `frame.x`), so that its mapping has no branch on it.
+override SKY_SUN_CENTRED: bool = false;
 // The sky pass's.
 @group(0) @binding(1) var<storage, read> directions: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read_write> radiance: array<vec4<f32>>;
@@ -108,14 +111,17 @@ fn bilinear(k: u32, layer: i32, uv: vec2<f32>) -> vec3<f32> {
 
 // mapping::upper_v_inverse.
 fn upper_v_inverse(vp: f32) -> f32 {
-    if vp <= KC {
-        return KA * sqrt(max(vp / KC, 0.0));
-    } else if vp <= KD {
-        let k2 = max(1.0 - (vp - KC) / (KD - KC), 0.0);
-        return KB - sqrt(k2) * (KB - KA);
-    }
+    // Each of the three pieces is a + b sqrt(c): the piece chosen first,
+    // then one square root (no branches for a SIMD lane to wait on).
     let s = (1.0 - vp) / (1.0 - KD);
-    return KB + sqrt(max(1.0 - s * s, 0.0)) * (1.0 - KB);
+    var abc = vec3<f32>(KB, 1.0 - KB, 1.0 - s * s);
+    if vp <= KD {
+        abc = vec3<f32>(KB, -(KB - KA), 1.0 - (vp - KC) / (KD - KC));
+    }
+    if vp <= KC {
+        abc = vec3<f32>(0.0, KA, vp / KC);
+    }
+    return abc.x + abc.y * sqrt(max(abc.z, 0.0));
 }
 
 // mapping::lower_v_inverse.
@@ -180,10 +186,7 @@ fn direction_in_region(uv: vec2<f32>, sun_centred: bool) -> vec3<f32> {
 // gives 0 or -pi: WGSL leaves atan2 at a zero y loosely specified), which
 // would read the opposite edge of the texture.
 fn heading(y: f32, x: f32) -> f32 {
-    if y == 0.0 {
-        return select(0.0, PI, x < 0.0);
-    }
-    return clamp(atan2(y, x), 0.0, PI);
+    return select(clamp(atan2(y, x), 0.0, PI), select(0.0, PI, x < 0.0), y == 0.0);
 }
 
 // DirectionMapping::uv_in_region, `d` in the frame with the sun at azimuth
@@ -205,12 +208,8 @@ fn uv_in_region(d_in: vec3<f32>, sun_centred: bool) -> vec2<f32> {
         let theta = atan2(r, dot(d, s));
         // The heading phi and its cosine (1 on the sun's axis, where the
         // CPU takes phi = 0).
-        var phi = 0.0;
-        var cos_phi = 1.0;
-        if r > 0.0 {
-            phi = heading(y, x);
-            cos_phi = x / r;
-        }
+        let phi = select(0.0, heading(y, x), r > 0.0);
+        let cos_phi = select(1.0, x / r, r > 0.0);
         let edge = horizon_edge(cos_phi, params.mapping.z);
         var vp = 0.5 + 0.5 * (theta - edge) / (PI - edge);
         if theta <= edge {
@@ -280,7 +279,7 @@ fn sky(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = params.header.y;
     let s = params.header.z;
     let d = vec3<f32>(c * dir.x + s * dir.y, -s * dir.x + c * dir.y, dir.z);
-    let uv = uv_in_region(d, params.frame.x > 0.5);
+    let uv = uv_in_region(d, SKY_SUN_CENTRED);
     var rgb = textureSampleLevel(frame_sky, linear, uv, 0.0).rgb * params.frame.y;
     // Inside the disk: within its angular radius of the sun, tested by the
     // sine (a cosine this close to 1 has too few digits in f32).

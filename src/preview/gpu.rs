@@ -87,6 +87,20 @@ impl Gpu {
         entry: &str,
         entries: &[wgpu::BindGroupLayoutEntry],
     ) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), PreviewError> {
+        self.compute_pipeline_with(label, source, entry, entries, &[])
+    }
+
+    /// [`Gpu::compute_pipeline`] with the shader's `override` constants set
+    /// (name, value): a variant compiled without the branches it does not
+    /// take.
+    pub fn compute_pipeline_with(
+        &self,
+        label: &'static str,
+        source: &str,
+        entry: &str,
+        entries: &[wgpu::BindGroupLayoutEntry],
+        constants: &[(&str, f64)],
+    ) -> Result<(wgpu::BindGroupLayout, wgpu::ComputePipeline), PreviewError> {
         self.checked(label, || {
             let layout =
                 self.device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries });
@@ -104,7 +118,7 @@ impl Gpu {
                 layout: Some(&pipeline_layout),
                 module: &module,
                 entry_point: Some(entry),
-                compilation_options: Default::default(),
+                compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
                 cache: None,
             });
             (layout, pipeline)

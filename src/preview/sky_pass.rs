@@ -83,7 +83,9 @@ pub struct SkyPass {
     compose_layout: wgpu::BindGroupLayout,
     compose: wgpu::ComputePipeline,
     sky_layout: wgpu::BindGroupLayout,
-    sky: wgpu::ComputePipeline,
+    /// The sky pass for the latitude-longitude frame texture, and for the
+    /// sun-centred one.
+    sky: [wgpu::ComputePipeline; 2],
     /// The composition in the frame sky texture (its parameters' bits), or
     /// None before the first: a frame composes only when this changes.
     composed: Rc<RefCell<Option<Vec<u32>>>>,
@@ -180,7 +182,12 @@ impl SkyPass {
             frame_in,
             linear,
         ];
-        let (sky_layout, sky) = gpu.compute_pipeline("sky", super::shaders::SKY_DECODE, "sky", &sky_entries)?;
+        let sky_of = |centred: f64| {
+            let constants = [("SKY_SUN_CENTRED", centred)];
+            gpu.compute_pipeline_with("sky", super::shaders::SKY_DECODE, "sky", &sky_entries, &constants)
+        };
+        let ((sky_layout, lat_long), (_, centred)) = (sky_of(0.0)?, sky_of(1.0)?);
+        let sky = [lat_long, centred];
         let composed = Rc::new(RefCell::new(None));
         Ok(SkyPass { textures, frame_sky, sampler, compose_layout, compose, sky_layout, sky, composed })
     }
@@ -273,7 +280,9 @@ impl SkyPass {
                 ],
             })
         })?;
-        frame.dispatch("sky", &self.sky, &bind);
+        // The frame row's first value: 1 for the sun-centred region.
+        let centred = params[4] > 0.5;
+        frame.dispatch("sky", &self.sky[usize::from(centred)], &bind);
         Ok(())
     }
 
