@@ -66,24 +66,6 @@ fn occlusion_along(d: vec3<f32>, depth_km: f32) -> f32 {
     return clamp(sum / 8.0, 0.0, 1.0);
 }
 
-// Slot k's Fog (shadowed false) or Shadowed Fog (true) texel.
-fn fog_texel(k: u32, shadowed: bool, xy: vec2<i32>, layer: i32) -> vec3<f32> {
-    if shadowed {
-        if k == 0u {
-            return textureLoad(shadowed0, xy, layer, 0).rgb;
-        } else if k == 1u {
-            return textureLoad(shadowed1, xy, layer, 0).rgb;
-        }
-        return textureLoad(shadowed2, xy, layer, 0).rgb;
-    }
-    if k == 0u {
-        return textureLoad(lit0, xy, layer, 0).rgb;
-    } else if k == 1u {
-        return textureLoad(lit1, xy, layer, 0).rgb;
-    }
-    return textureLoad(lit2, xy, layer, 0).rgb;
-}
-
 // fog::bilinear_by's cell and weights: texel i of n at i / (n - 1).
 struct Cell {
     ij: vec2<i32>,
@@ -96,12 +78,16 @@ fn cell(uv: vec2<f32>, n: vec2<i32>) -> Cell {
     return Cell(ij, p - vec2<f32>(ij));
 }
 
-fn fog_bilinear(k: u32, shadowed: bool, layer: i32, uv: vec2<f32>) -> vec3<f32> {
-    let c = cell(uv, vec2<i32>(textureDimensions(lit0)));
-    let a = fog_texel(k, shadowed, c.ij, layer);
-    let b = fog_texel(k, shadowed, c.ij + vec2<i32>(1, 0), layer);
-    let d = fog_texel(k, shadowed, c.ij + vec2<i32>(0, 1), layer);
-    let e = fog_texel(k, shadowed, c.ij + vec2<i32>(1, 1), layer);
+// One of a slot's Fog or Shadowed Fog arrays, filtered. The array is a
+// parameter, not picked by a branch on the slot: lavapipe runs every side
+// of a branch it cannot prove uniform, which read all six arrays for each
+// texel.
+fn fog_bilinear(fog: texture_2d_array<f32>, layer: i32, uv: vec2<f32>) -> vec3<f32> {
+    let c = cell(uv, vec2<i32>(textureDimensions(fog)));
+    let a = textureLoad(fog, c.ij, layer, 0).rgb;
+    let b = textureLoad(fog, c.ij + vec2<i32>(1, 0), layer, 0).rgb;
+    let d = textureLoad(fog, c.ij + vec2<i32>(0, 1), layer, 0).rgb;
+    let e = textureLoad(fog, c.ij + vec2<i32>(1, 1), layer, 0).rgb;
     return (1.0 - c.f.y) * ((1.0 - c.f.x) * a + c.f.x * b) + c.f.y * ((1.0 - c.f.x) * d + c.f.x * e);
 }
 
@@ -117,13 +103,21 @@ fn attenuation_bilinear(layer: i32, uv: vec2<f32>) -> vec3<f32> {
 // One slice's fog blended by the cloud occlusion, each LUT's scale undone:
 // (1 - occlusion) Fog + occlusion Shadowed Fog, reading only the LUTs whose
 // weight is not 0.
-fn occluded(k: u32, layer: i32, uv: vec2<f32>, lit_scale: f32, shadowed_scale: f32, occlusion: f32) -> vec3<f32> {
+fn occluded(
+    lit: texture_2d_array<f32>,
+    shadowed: texture_2d_array<f32>,
+    layer: i32,
+    uv: vec2<f32>,
+    lit_scale: f32,
+    shadowed_scale: f32,
+    occlusion: f32,
+) -> vec3<f32> {
     var f = vec3<f32>(0.0);
     if occlusion < 1.0 {
-        f += (1.0 - occlusion) * (fog_bilinear(k, false, layer, uv) * lit_scale);
+        f += (1.0 - occlusion) * (fog_bilinear(lit, layer, uv) * lit_scale);
     }
     if occlusion > 0.0 {
-        f += occlusion * (fog_bilinear(k, true, layer, uv) * shadowed_scale);
+        f += occlusion * (fog_bilinear(shadowed, layer, uv) * shadowed_scale);
     }
     return f;
 }
@@ -165,6 +159,49 @@ fn between(a: f32, b: f32, f: f32) -> f32 {
     return (1.0 - f) * a + f * b;
 }
 
+// What a view shares across the active skies.
+struct View {
+    uv: vec2<f32>,
+    sin_elevation: f32,
+    theta: f32,
+    occlusion: f32,
+    depth_km: f32,
+}
+
+// The fog in front of the surface and its attenuation, weighted sums over
+// the active skies.
+struct FogSum {
+    inscatter: vec3<f32>,
+    transmitted: vec3<f32>,
+}
+
+fn add(a: FogSum, b: FogSum) -> FogSum {
+    return FogSum(a.inscatter + b.inscatter, a.transmitted + b.transmitted);
+}
+
+// Active sky k's weighted fog and attenuation toward the view.
+fn sky_fog(k: u32, lit: texture_2d_array<f32>, shadowed: texture_2d_array<f32>, view: View) -> FogSum {
+    let slices = params.sky[4u * k];
+    let scales = params.sky[4u * k + 1u];
+    let fit = params.sky[4u * k + 2u];
+    let geometry = params.sky[4u * k + 3u];
+    let t = slices.y;
+    let a = occluded(lit, shadowed, i32(slices.z), view.uv, scales.x, scales.z, view.occlusion);
+    var b = a;
+    if t > 0.0 {
+        b = occluded(lit, shadowed, i32(slices.w), view.uv, scales.y, scales.w, view.occlusion);
+    }
+    let x = clamp(view.depth_km / depth_max_km(geometry, view.sin_elevation), 0.0, 1.0);
+    let fraction = falloff(fit.x, fit.y, x, view.theta);
+    let fog_k = vec3<f32>(between(a.x, b.x, t), between(a.y, b.y, t), between(a.z, b.z, t)) * fraction;
+    var u_depth = 0.0;
+    if x > 0.0 {
+        u_depth = pow(x, 1.0 / 3.0);
+    }
+    let attenuation_k = attenuation_bilinear(i32(fit.z), vec2<f32>(u_depth, view.uv.y));
+    return FogSum(slices.x * fog_k, slices.x * attenuation_k);
+}
+
 @compute @workgroup_size(64)
 fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
     let i = id.x;
@@ -190,30 +227,21 @@ fn fog(@builtin(global_invocation_id) id: vec3<u32>) {
     if params.grid.x > 0.5 {
         occlusion = occlusion_along(d, depth_km);
     }
-    var inscatter = vec3<f32>(0.0);
-    var transmitted = vec3<f32>(0.0);
-    for (var k = 0u; k < u32(params.header.z); k++) {
-        let slices = params.sky[4u * k];
-        let scales = params.sky[4u * k + 1u];
-        let fit = params.sky[4u * k + 2u];
-        let geometry = params.sky[4u * k + 3u];
-        let t = slices.y;
-        let a = occluded(k, i32(slices.z), uv, scales.x, scales.z, occlusion);
-        var b = a;
-        if t > 0.0 {
-            b = occluded(k, i32(slices.w), uv, scales.y, scales.w, occlusion);
-        }
-        let x = clamp(depth_km / depth_max_km(geometry, sin_elevation), 0.0, 1.0);
-        let fraction = falloff(fit.x, fit.y, x, theta);
-        let fog_k = vec3<f32>(between(a.x, b.x, t), between(a.y, b.y, t), between(a.z, b.z, t)) * fraction;
-        var u_depth = 0.0;
-        if x > 0.0 {
-            u_depth = pow(x, 1.0 / 3.0);
-        }
-        let attenuation_k = attenuation_bilinear(i32(fit.z), vec2<f32>(u_depth, v));
-        inscatter += slices.x * fog_k;
-        transmitted += slices.x * attenuation_k;
+    let view = View(uv, sin_elevation, theta, occlusion, depth_km);
+    // The active slots one by one, each with its own arrays.
+    let count = u32(params.header.z);
+    var sum = FogSum(vec3<f32>(0.0), vec3<f32>(0.0));
+    if count > 0u {
+        sum = add(sum, sky_fog(0u, lit0, shadowed0, view));
     }
+    if count > 1u {
+        sum = add(sum, sky_fog(1u, lit1, shadowed1, view));
+    }
+    if count > 2u {
+        sum = add(sum, sky_fog(2u, lit2, shadowed2, view));
+    }
+    let inscatter = sum.inscatter;
+    let transmitted = sum.transmitted;
     // w: the cloud occlusion used, for inspection (elsewhere w is 1).
     radiance[i] = vec4<f32>(surface[i].rgb * transmitted + inscatter, occlusion);
 }
