@@ -77,35 +77,21 @@ override SKY_SUN_CENTRED: bool = false;
 @group(0) @binding(5) var sky2: texture_2d_array<f32>;
 @group(0) @binding(6) var frame_out: texture_storage_2d<rgba16float, write>;
 
-fn texel(k: u32, xy: vec2<i32>, layer: i32) -> vec3<f32> {
-    if k == 0u {
-        return textureLoad(sky0, xy, layer, 0).rgb;
-    } else if k == 1u {
-        return textureLoad(sky1, xy, layer, 0).rgb;
-    }
-    return textureLoad(sky2, xy, layer, 0).rgb;
-}
-
-fn size_of(k: u32) -> vec2<i32> {
-    if k == 0u {
-        return vec2<i32>(textureDimensions(sky0));
-    } else if k == 1u {
-        return vec2<i32>(textureDimensions(sky1));
-    }
-    return vec2<i32>(textureDimensions(sky2));
-}
-
 // Texture::bilinear: texel centres at ((x + 0.5) / w, (y + 0.5) / h),
 // clamped to the edge.
-fn bilinear(k: u32, layer: i32, uv: vec2<f32>) -> vec3<f32> {
-    let n = size_of(k);
+// The array is a parameter, not picked by a branch on the sky's slot
+// (lavapipe runs every side of a branch it cannot prove uniform).
+fn bilinear(sky: texture_2d_array<f32>, layer: i32, uv: vec2<f32>) -> vec3<f32> {
+    let n = vec2<i32>(textureDimensions(sky));
     let p = uv * vec2<f32>(n) - 0.5;
     let p0 = floor(p);
     let f = p - p0;
     let a = clamp(vec2<i32>(p0), vec2<i32>(0), n - 1);
     let b = clamp(vec2<i32>(p0) + 1, vec2<i32>(0), n - 1);
-    let top = texel(k, vec2<i32>(a.x, a.y), layer) * (1.0 - f.x) + texel(k, vec2<i32>(b.x, a.y), layer) * f.x;
-    let bottom = texel(k, vec2<i32>(a.x, b.y), layer) * (1.0 - f.x) + texel(k, vec2<i32>(b.x, b.y), layer) * f.x;
+    let top = textureLoad(sky, vec2<i32>(a.x, a.y), layer, 0).rgb * (1.0 - f.x)
+        + textureLoad(sky, vec2<i32>(b.x, a.y), layer, 0).rgb * f.x;
+    let bottom = textureLoad(sky, vec2<i32>(a.x, b.y), layer, 0).rgb * (1.0 - f.x)
+        + textureLoad(sky, vec2<i32>(b.x, b.y), layer, 0).rgb * f.x;
     return top * (1.0 - f.y) + bottom * f.y;
 }
 
@@ -231,15 +217,15 @@ fn between(a: f32, b: f32, f: f32) -> f32 {
 }
 
 // decode::sample_sky for active sky k.
-fn sample_sky(k: u32, d: vec3<f32>) -> vec3<f32> {
+fn sample_sky(k: u32, sky: texture_2d_array<f32>, d: vec3<f32>) -> vec3<f32> {
     let r0 = params.sky[2u * k];
     let r1 = params.sky[2u * k + 1u];
     let f = r0.y;
-    let a = bilinear(k, i32(r0.z), uv_in_region(d, r1.z > 0.5)) * r1.x;
+    let a = bilinear(sky, i32(r0.z), uv_in_region(d, r1.z > 0.5)) * r1.x;
     if f == 0.0 {
         return a;
     }
-    let b = bilinear(k, i32(r0.w), uv_in_region(d, r1.w > 0.5)) * r1.y;
+    let b = bilinear(sky, i32(r0.w), uv_in_region(d, r1.w > 0.5)) * r1.y;
     if f == 1.0 {
         return b;
     }
@@ -255,10 +241,17 @@ fn compose(@builtin(global_invocation_id) id: vec3<u32>) {
     }
     let uv = (vec2<f32>(id.xy) + 0.5) / vec2<f32>(n);
     let d = direction_in_region(uv, params.frame.x > 0.5);
+    // The active slots one by one, each with its own array.
     var rgb = vec3<f32>(0.0);
     let count = u32(params.header.w);
-    for (var k = 0u; k < count; k++) {
-        rgb += params.sky[2u * k].x * sample_sky(k, d);
+    if count > 0u {
+        rgb += params.sky[0].x * sample_sky(0u, sky0, d);
+    }
+    if count > 1u {
+        rgb += params.sky[2].x * sample_sky(1u, sky1, d);
+    }
+    if count > 2u {
+        rgb += params.sky[4].x * sample_sky(2u, sky2, d);
     }
     textureStore(frame_out, id.xy, vec4<f32>(rgb * params.frame.z, 1.0));
 }
