@@ -112,10 +112,10 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
         let start = std::time::Instant::now();
         clouds.step(&gpu, &weather, &settings, &schedule)?;
         steps.push(start.elapsed().as_secs_f64());
-        let wall = |pass: Option<Pass>, dirs: &[Option<glam::DVec3>]| -> Result<f64> {
+        let wall = |pass: Option<Pass>, repeats: usize, dirs: &[Option<glam::DVec3>]| -> Result<f64> {
             let mut frame = Frame::new(&gpu, dirs)?;
             let start = std::time::Instant::now();
-            for _ in 0..pass.map_or(0, |p| PASSES.iter().find(|q| q.0 == p).map_or(0, |q| q.2)) {
+            for _ in 0..repeats {
                 match pass {
                     Some(Pass::Plain) => plain.encode(&gpu, &mut frame)?,
                     Some(Pass::Composition) => sky.compose(&gpu, &mut frame, &luts, &weather)?,
@@ -132,14 +132,14 @@ pub fn run(a: BenchPreviewArgs) -> Result<ExitCode> {
             frame.finish()?;
             Ok(start.elapsed().as_secs_f64())
         };
-        let (empty, empty_one) = (wall(None, &dirs)?, wall(None, &one)?);
+        let (empty, empty_one) = (wall(None, 0, &dirs)?, wall(None, 0, &one)?);
         let mut round = [0.0; PASSES.len()];
         for (k, &(pass, _, repeats)) in PASSES.iter().enumerate() {
             round[k] = match pass {
                 // A bake without fog has no landscape: nothing to time.
                 Pass::Landscape if landscape.is_none() => f64::NAN,
-                Pass::Composition => (wall(Some(pass), &one)? - empty_one) / repeats as f64,
-                _ => (wall(Some(pass), &dirs)? - empty) / repeats as f64,
+                Pass::Composition => (wall(Some(pass), repeats, &one)? - empty_one) / repeats as f64,
+                _ => (wall(Some(pass), repeats, &dirs)? - empty) / repeats as f64,
             };
         }
         rounds.push(round);

@@ -228,8 +228,8 @@ impl SkyPass {
                 ],
             })
         })?;
-        let size = self.frame_sky.texture().size();
-        let groups = [size.width.div_ceil(8), size.height.div_ceil(8), 1];
+        let (width, height) = self.frame_size();
+        let groups = [(width as u32).div_ceil(8), (height as u32).div_ceil(8), 1];
         frame.dispatch_groups("sky composition", &self.compose, &bind, groups);
         *self.composed.borrow_mut() = Some(key);
         let composed = Rc::clone(&self.composed);
@@ -280,8 +280,7 @@ impl SkyPass {
                 ],
             })
         })?;
-        // The frame row's first value: 1 for the sun-centred region.
-        let centred = params[4] > 0.5;
+        let centred = params[FRAME_CENTRED] > 0.5;
         frame.dispatch("sky", &self.sky[usize::from(centred)], &bind);
         Ok(())
     }
@@ -311,6 +310,10 @@ fn composition_key(params: &[f32], active: &[usize]) -> Vec<u32> {
     let rows = params[..PARAMS_BEFORE_SUN].iter().enumerate().filter(|(i, _)| !matches!(i, 1 | 2));
     active.iter().map(|&i| i as u32).chain(rows.map(|(_, x)| x.to_bits())).collect()
 }
+
+/// Where in `Params` the frame row's first value lies: 1 for the
+/// sun-centred region, 0 for the latitude-longitude one.
+const FRAME_CENTRED: usize = 4;
 
 /// The floats of `Params` before its `sun` row: header, frame, mapping,
 /// six sky rows.
@@ -365,9 +368,14 @@ pub(crate) fn active_skies(luts: &Luts, weather: &Weather, usable: impl Fn(&str)
 /// slices straddle the switch, one of them is read across regions); None
 /// without an active sky.
 pub fn frame_mapping(luts: &Luts, weather: &Weather) -> Option<mapping::DirectionMapping> {
-    let sun_zenith_deg = (90.0 - weather.sun_elevation_deg).clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG);
     let (first, _) = *active_skies(luts, weather, |_| true).first()?;
-    Some(mapping::DirectionMapping::new(sun_zenith_deg, luts.manifest.skies[first].threshold_sun_zenith_deg))
+    Some(mapping_of(luts, weather, first))
+}
+
+/// [`frame_mapping`] with the first active sky known (manifest index).
+fn mapping_of(luts: &Luts, weather: &Weather, first: usize) -> mapping::DirectionMapping {
+    let sun_zenith_deg = (90.0 - weather.sun_elevation_deg).clamp(0.0, mapping::LOWEST_SUN_ZENITH_DEG);
+    mapping::DirectionMapping::new(sun_zenith_deg, luts.manifest.skies[first].threshold_sun_zenith_deg)
 }
 
 /// The shader's `Params` for `weather` (see `sky_decode.wgsl`) and the
@@ -402,7 +410,7 @@ pub fn frame_params(luts: &Luts, weather: &Weather) -> Result<(Vec<f32>, Vec<usi
     }
     // The frame sky texture's values over the largest slice scale, so that
     // what the slices store (up to 2^15) stays within a half float's range.
-    let frame_centred = frame_mapping(luts, weather).is_some_and(|m| m.sun_centred());
+    let frame_centred = active.first().is_some_and(|&(first, _)| mapping_of(luts, weather, first).sun_centred());
     let frame_scale = if frame_scale > 0.0 { frame_scale } else { 1.0 };
     params.extend([if frame_centred { 1.0 } else { 0.0 }, frame_scale, 1.0 / frame_scale, 0.0]);
     params.extend([libm::sin(theta_sun), libm::cos(theta_sun), libm::tan(theta_sun), theta_sun].map(|x| x as f32));
